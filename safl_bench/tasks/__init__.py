@@ -1,0 +1,18 @@
+"""Benchmark tasks: versioned specs, a Gymnasium-style registry, materialised tasks, and the
+streaming environment (`gymnasium.make(task_id)` after `import safl_bench`).
+
+    from safl_bench import tasks
+    task = tasks.make("SAFL/Synth00-T5R1.5-v0")
+    db, q = task.database("topview"), task.queries("topview")
+    labels = task.truth.labels(matches)          # TP 1 / FP -1 / excluded 0
+"""
+
+from __future__ import annotations
+
+from safl_bench.tasks.builtin import SUITES, register_builtin, suite
+from safl_bench.tasks.registry import make, register, registry, spec, unregister
+from safl_bench.tasks.spec import TaskSpec
+
+register_builtin()
+
+__all__ = ["SUITES", "TaskSpec", "make", "register", "registry", "spec", "suite", "unregister"]

@@ -1,0 +1,124 @@
+"""The built-in tasks and the named suites.
+
+Paper protocol (Table II): the twelve conditions T{1,5,10,20}R{1,1.5,2} on the test sequences 00
+and 09, for the embedded synthetic default (`SAFL/Synth00-T1R1-v0`) and for KITTI
+(`SAFL/KITTI00-T1R1-v0`); every 4th frame, as the authors' public code did (the paper is silent),
+true positive within 10 m, noise seed 0. A clean T0R0 sanity task per sequence checks that a
+method finds the route without noise.
+
+Revisit protocol: loop closure within one sequence (`SAFL/KITTI00-Revisit-v0`); every 4th frame
+(so the clean database maps are shared with the paper tasks), a query may only match frames more
+than 30 s older, true positive within 3 m, false positive beyond 20 m. On KITTI 00, 05 and 08
+(the sequences with many revisits; 08 revisits in the opposite direction) and on the synthetic
+test sequences.
+
+Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
+"""
+
+from __future__ import annotations
+
+from safl_bench.errors import RegistryError
+from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition
+from safl_bench.tasks.registry import register
+from safl_bench.tasks.spec import TaskSpec
+
+NAMESPACE = "SAFL"
+PAPER_STEP = 4
+PAPER_TP_RADIUS_M = 10.0
+REVISIT_STEP = 4
+REVISIT_WINDOW_S = 30.0
+REVISIT_TP_RADIUS_M = 3.0
+REVISIT_FP_RADIUS_M = 20.0
+
+#: Test sequences of the paper protocol; the first is the default test sequence.
+PAPER_SEQUENCES = ("00", "09")
+REVISIT_SEQUENCES = {"synth": ("00", "09"), "kitti": ("00", "05", "08")}
+SOURCE_LABEL = {"synth": "Synth", "kitti": "KITTI"}
+
+SUITES = {
+    "paper": "the paper's twelve conditions on the default test sequence 00",
+    "paper-full": "the paper's twelve conditions on both test sequences 00 and 09",
+    "revisit": "loop closure within one sequence (revisit protocol)",
+    "sanity": "clean T0R0 re-render tasks (queries equal the database)",
+    "all": "every built-in task",
+}
+
+_BUILTIN: dict[str, list[str]] = {name: [] for name in SUITES}
+
+
+def paper_id(source: str, sequence: str, condition: Condition, version: int = 0) -> str:
+    """Id of a paper-protocol task, e.g. SAFL/KITTI00-T5R1.5-v0."""
+    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-{condition.name}-v{version}"
+
+
+def revisit_id(source: str, sequence: str, version: int = 0) -> str:
+    """Id of a revisit-protocol task, e.g. SAFL/KITTI08-Revisit-v0."""
+    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-Revisit-v{version}"
+
+
+def _paper(source: str, sequence: str, condition: Condition) -> TaskSpec:
+    what = "clean re-render (sanity)" if condition.is_clean else f"viewpoint noise {condition.name}"
+    return TaskSpec(
+        id=paper_id(source, sequence, condition),
+        source=source,
+        sequence=sequence,
+        protocol="paper",
+        condition=condition,
+        step=PAPER_STEP,
+        tp_radius_m=PAPER_TP_RADIUS_M,
+        fp_radius_m=PAPER_TP_RADIUS_M,
+        description=f"paper protocol, {what}",
+    )
+
+
+def _revisit(source: str, sequence: str) -> TaskSpec:
+    return TaskSpec(
+        id=revisit_id(source, sequence),
+        source=source,
+        sequence=sequence,
+        protocol="revisit",
+        step=REVISIT_STEP,
+        tp_radius_m=REVISIT_TP_RADIUS_M,
+        fp_radius_m=REVISIT_FP_RADIUS_M,
+        window_s=REVISIT_WINDOW_S,
+        description="revisit protocol, loop closure within the sequence",
+    )
+
+
+def _add(suites: tuple[str, ...], task: TaskSpec) -> None:
+    register(task)
+    for name in (*suites, "all"):
+        _BUILTIN[name].append(task.id)
+
+
+def register_builtin() -> None:
+    """Register every built-in task (once; `import safl_bench` does it)."""
+    if _BUILTIN["all"]:
+        return
+    for source in ("synth", "kitti"):
+        for sequence in PAPER_SEQUENCES:
+            for condition in PAPER_CONDITIONS:
+                default = ("paper",) if sequence == PAPER_SEQUENCES[0] else ()
+                _add((*default, "paper-full"), _paper(source, sequence, condition))
+        for sequence in PAPER_SEQUENCES:
+            _add(("sanity",), _paper(source, sequence, CLEAN))
+        for sequence in REVISIT_SEQUENCES[source]:
+            _add(("revisit",), _revisit(source, sequence))
+
+
+def suite(name: str, source: str | None = None) -> list[str]:
+    """Ids of a named suite ('paper', 'paper-full', 'revisit', 'sanity', 'all').
+
+    `source` keeps only the tasks on "synth" (the embedded default) or "kitti"; None keeps both.
+    """
+    import difflib
+
+    from safl_bench.tasks.registry import registry
+
+    if name not in SUITES:
+        close = difflib.get_close_matches(name, SUITES, n=1)
+        hint = f" Did you mean: {close[0]}?" if close else ""
+        raise RegistryError(f"unknown suite {name!r}; suites: {', '.join(SUITES)}.{hint}")
+    if source not in (None, "synth", "kitti"):
+        raise RegistryError(f"unknown source {source!r}; sources: synth, kitti")
+    return [i for i in _BUILTIN[name] if source is None or registry[i].source == source]

@@ -1,0 +1,148 @@
+"""`TaskSpec`: the frozen definition of one benchmark task (what makes two runs comparable).
+
+A task id follows Gymnasium's `[namespace/]name-v{version}` form, e.g. `SAFL/Synth00-T5R1.5-v0`.
+Everything that changes a task's data or its ground truth is a field of the spec and enters its
+`fingerprint`, which result records store: a record made under a different definition of the
+same id can then be detected. A changed definition gets a new version; old versions stay
+registered so that old records stay reproducible.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any
+
+from safl_bench.errors import ConfigError
+from safl_bench.fingerprint import fingerprint, to_jsonable
+from safl_bench.mapconfig import MapConfig
+from safl_bench.noise import CLEAN, Condition
+
+#: Bump when the code that turns a spec into data or ground truth changes meaning; it enters every
+#: fingerprint, so records made before the change are told apart from those made after it.
+DEFINITION_REVISION = 1
+
+SOURCES = ("synth", "kitti")
+PROTOCOLS = ("paper", "revisit")
+
+#: Gymnasium's id grammar: `[namespace/]name[-v{version}]`.
+ID_RE = re.compile(r"^(?:(?P<namespace>[\w:-]+)/)?(?P<name>[\w:.-]+?)(?:-v(?P<version>\d+))?$")
+
+
+def parse_id(task_id: str) -> tuple[str | None, str, int | None]:
+    """Split a task id into (namespace, name, version); version None when the id has none."""
+    match = ID_RE.fullmatch(task_id)
+    if not match:
+        raise ConfigError(f"malformed task id {task_id!r} (expected e.g. 'SAFL/Synth00-T1R1-v0')")
+    version = match.group("version")
+    return match.group("namespace"), match.group("name"), None if version is None else int(version)
+
+
+def make_id(namespace: str | None, name: str, version: int | None) -> str:
+    """Inverse of `parse_id`."""
+    full = f"{namespace}/{name}" if namespace else name
+    return full if version is None else f"{full}-v{version}"
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One benchmark task.
+
+    source: "synth" (the embedded default, world `data_seed`) or "kitti" (a KITTI odometry root).
+    sequence: the sequence name, e.g. "00".
+    protocol: "paper" (database = clean maps, queries = the same frames re-rendered with
+        `condition`; true positive within `tp_radius_m`) or "revisit" (one sequence, queries =
+        database = clean maps; a query may only match frames older than `window_s`; true positive
+        within `tp_radius_m`, false positive beyond `fp_radius_m`, the band between excluded).
+    step: every `step`-th frame (0, step, 2*step, ...) is used as database and query frame.
+    seed: seed of the viewpoint noise (`safl_bench.noise.sample_offsets`).
+    map_config: every setting of the top-view maps.
+    """
+
+    id: str
+    source: str
+    sequence: str
+    protocol: str = "paper"
+    condition: Condition = CLEAN
+    step: int = 4
+    seed: int = 0
+    data_seed: int = 0
+    map_config: MapConfig = field(default_factory=MapConfig)
+    tp_radius_m: float = 10.0
+    fp_radius_m: float = 10.0
+    window_s: float | None = None
+    description: str = ""
+    namespace: str | None = field(init=False, repr=False, compare=False)
+    name: str = field(init=False, repr=False, compare=False)
+    version: int = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        ns, name, version = parse_id(self.id)
+        if version is None:
+            raise ConfigError(f"task id {self.id!r} needs a version suffix such as '-v0'")
+        object.__setattr__(self, "namespace", ns)
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "version", version)
+        if isinstance(self.condition, str):
+            object.__setattr__(self, "condition", Condition.parse(self.condition))
+        if self.source not in SOURCES:
+            raise ConfigError(
+                f"task {self.id}: source must be one of {SOURCES}, got {self.source!r}"
+            )
+        if self.protocol not in PROTOCOLS:
+            raise ConfigError(
+                f"task {self.id}: protocol must be one of {PROTOCOLS}, got {self.protocol!r}"
+            )
+        if not isinstance(self.step, int) or self.step < 1:
+            raise ConfigError(
+                f"task {self.id}: frame step must be an integer >= 1, got {self.step!r}"
+            )
+        if not 0 <= self.tp_radius_m <= self.fp_radius_m:
+            raise ConfigError(
+                f"task {self.id}: need 0 <= tp_radius_m <= fp_radius_m, got {self.tp_radius_m}, {self.fp_radius_m}"
+            )
+        if self.protocol == "paper":
+            if self.window_s is not None or self.fp_radius_m != self.tp_radius_m:
+                raise ConfigError(
+                    f"task {self.id}: the paper protocol has no time window and no excluded band"
+                )
+        else:
+            if not self.condition.is_clean:
+                raise ConfigError(
+                    f"task {self.id}: revisit queries are the clean frames; condition must be T0R0"
+                )
+            if self.window_s is None or self.window_s < 0:
+                raise ConfigError(
+                    f"task {self.id}: the revisit protocol needs a time window >= 0 s"
+                )
+
+    def definition(self) -> dict[str, Any]:
+        """Everything that changes the task's data or ground truth (no id, version or prose)."""
+        return {
+            "revision": DEFINITION_REVISION,
+            "source": self.source,
+            "data_seed": self.data_seed if self.source == "synth" else None,
+            "sequence": self.sequence,
+            "protocol": self.protocol,
+            "condition": self.condition.name,
+            "step": self.step,
+            "seed": self.seed,
+            "map_config": to_jsonable(self.map_config),
+            "tp_radius_m": self.tp_radius_m,
+            "fp_radius_m": self.fp_radius_m,
+            "window_s": self.window_s,
+        }
+
+    @property
+    def fingerprint(self) -> str:
+        """Stable hex digest of `definition()`; stored in result records."""
+        return fingerprint(self.definition())
+
+    def to_dict(self) -> dict[str, Any]:
+        """The spec as plain JSON (for result records), fingerprint included."""
+        return {
+            "id": self.id,
+            "version": self.version,
+            **self.definition(),
+            "fingerprint": self.fingerprint,
+        }
