@@ -175,6 +175,20 @@ class GroundTruth:
             return np.ones((self.n_queries, self.n_database), dtype=bool)
         return self.query_times[:, None] - self.database_times[None, :] > self.window_s
 
+    def db_limit(self) -> np.ndarray:
+        """(Nq,) int64: query i may match exactly the database frames j < db_limit[i].
+
+        This is the form the shared matcher takes (`matching.seqslam(..., db_limit=...)`); it
+        exists when every query's candidates are a prefix of the database (database in time
+        order), which holds for both built-in protocols. Raises ConfigError otherwise.
+        """
+        mask = self.candidate_mask()
+        limit = mask.sum(axis=1).astype(np.int64)
+        prefix = np.arange(self.n_database)[None, :] < limit[:, None]
+        if not np.array_equal(mask, prefix):
+            raise ConfigError("the candidates of some query are not a prefix of the database")
+        return limit
+
     def distances(self, query: np.ndarray | int, match: np.ndarray | int) -> np.ndarray:
         """Ground-plane distance (m) between queries and database frames (elementwise)."""
         diff = self.query_positions[np.asarray(query)] - self.database_positions[np.asarray(match)]

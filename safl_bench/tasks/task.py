@@ -1,0 +1,222 @@
+"""`Task`: a materialised task: its frames, positions, times, ground truth and views.
+
+Views are what methods read, by kind: "topview" (F, H, W) float32 maps in [0, 1], or "points"
+(a list of (M_i, 3) float32 local-map points in the viewpoint frame). They come from the map
+cache on first access, so making a task is cheap until a view is asked for:
+
+    task = safl_bench.tasks.make("SAFL/Synth00-T5R1.5-v0")
+    db = task.database("topview")      # clean maps of every `step`-th frame
+    q = task.queries("topview")        # the same frames re-rendered with viewpoint noise
+    labels = task.truth.labels(match)  # per query: TP 1, FP -1, excluded 0
+
+Ground-truth positions of a query are those of its frame (`KittiSequence.positions`): the
+viewpoint noise simulates a different pass over the same place; it does not move the place.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.groundtruth import GroundTruth
+from safl_bench.mapbuild import select_frames
+from safl_bench.noise import CLEAN, sample_offsets
+from safl_bench.tasks.spec import TaskSpec
+
+if TYPE_CHECKING:
+    from safl_bench.datasource import DataSource
+
+KINDS = ("topview", "points")
+
+
+def open_source(spec: TaskSpec, kitti_root: str | None = None) -> DataSource:
+    """The data source a spec names: the embedded default or the KITTI root (explicit or env)."""
+    from safl_bench import datasource, paths
+
+    if spec.source == "synth":
+        return datasource.synth_source(seed=spec.data_seed, sequences=(spec.sequence,))
+    try:
+        root = paths.kitti_root(kitti_root)
+    except DataError as exc:
+        raise DataError(f"task {spec.id}: {exc}") from None
+    return datasource.kitti_source(root)
+
+
+class Task:
+    """One task ready to run: database and query frames with ground truth; views on demand.
+
+    Attributes: `spec`, `source` (None for a task built from arrays), `database_frames` and
+    `query_frames` (indices into the sequence), `database_positions` / `query_positions`
+    (n, 2) m, `database_times` / `query_times` (n,) s, `query_offsets` (Nq, 3) the viewpoint
+    noise [dx, dy, dtheta] each query was rendered with, `truth` (`GroundTruth`).
+    """
+
+    def __init__(
+        self,
+        spec: TaskSpec,
+        *,
+        positions: np.ndarray,
+        times: np.ndarray,
+        source: DataSource | None = None,
+        progress: bool = True,
+    ) -> None:
+        positions = np.asarray(positions, dtype=np.float64)
+        times = np.asarray(times, dtype=np.float64)
+        if positions.ndim != 2 or positions.shape[1] != 2 or len(times) != len(positions):
+            raise DataError(
+                f"task {spec.id}: need (n, 2) positions and n times, got {positions.shape}, {times.shape}"
+            )
+        self.spec = spec
+        self.source = source
+        self.progress = progress
+        self.sequence_length = len(positions)
+        frames = select_frames(self.sequence_length, spec.step)
+        self.database_frames = frames
+        self.query_frames = frames.copy()
+        self.database_positions = positions[frames]
+        self.query_positions = positions[self.query_frames]
+        self.database_times = times[frames]
+        self.query_times = times[self.query_frames]
+        self.query_offsets = sample_offsets(len(self.query_frames), spec.condition, spec.seed)
+        self.truth = GroundTruth(
+            query_positions=self.query_positions,
+            database_positions=self.database_positions,
+            query_times=self.query_times,
+            database_times=self.database_times,
+            tp_radius=spec.tp_radius_m,
+            fp_radius=spec.fp_radius_m,
+            window_s=spec.window_s if spec.protocol == "revisit" else None,
+        )
+        self._views: dict[tuple[str, str], Any] = {}
+
+    @classmethod
+    def from_spec(
+        cls,
+        spec: TaskSpec,
+        *,
+        kitti_root: str | None = None,
+        source: DataSource | None = None,
+        progress: bool = True,
+    ) -> Task:
+        """Open the spec's data source and sequence (or `source`, of the same kind)."""
+        if source is None:
+            source = open_source(spec, kitti_root)
+        elif source.kind != spec.source:
+            raise ConfigError(
+                f"task {spec.id} runs on {spec.source} data, got a {source.kind} source"
+            )
+        try:
+            sequence = source.sequence(spec.sequence)
+            positions, times = sequence.positions, sequence.times
+        except DataError as exc:
+            raise DataError(f"task {spec.id}: {exc}") from None
+        return cls(spec, positions=positions, times=times, source=source, progress=progress)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        spec: TaskSpec,
+        *,
+        positions: np.ndarray,
+        times: np.ndarray,
+        database: Any,
+        queries: Any,
+        kind: str = "topview",
+    ) -> Task:
+        """A task on in-memory data: views of the selected frames given for one `kind`."""
+        task = cls(spec, positions=positions, times=times, progress=False)
+        for role, views in (("database", database), ("queries", queries)):
+            if len(views) != len(task.database_frames):
+                raise DataError(
+                    f"task {spec.id}: {len(views)} {role} views for {len(task.database_frames)} frames"
+                )
+            task._views[role, kind] = views
+        return task
+
+    @property
+    def id(self) -> str:
+        return self.spec.id
+
+    def __len__(self) -> int:
+        """Number of queries."""
+        return len(self.query_frames)
+
+    def __repr__(self) -> str:
+        return (
+            f"Task({self.spec.id}: {len(self.database_frames)} database frames, "
+            f"{len(self.query_frames)} queries, protocol {self.spec.protocol})"
+        )
+
+    def database(self, kind: str = "topview") -> Any:
+        """Database views: (Ndb, H, W) float32 top views, or a list of (M_i, 3) point arrays."""
+        return self._load("database", kind)
+
+    def queries(self, kind: str = "topview") -> Any:
+        """Query views, same kinds as `database`; revisit tasks query with the database views."""
+        return self._load("queries", kind)
+
+    def prepare(self, kinds: Sequence[str] = ("topview",)) -> None:
+        """Render every view the task needs in one pass over the scans (then cached on disk)."""
+        from safl_bench import mapcache
+
+        for kind in kinds:
+            self._check_kind(kind)
+        if self.source is None:
+            return
+        mapcache.prepare(
+            self.source,
+            self.spec.sequence,
+            self.spec.map_config,
+            frames=self.database_frames,
+            conditions=self._conditions(),
+            seed=self.spec.seed,
+            kinds=tuple(kinds),
+            progress=self.progress,
+        )
+
+    def _conditions(self) -> list:
+        if self.spec.protocol == "revisit" or self.spec.condition.is_clean:
+            return [CLEAN]
+        return [CLEAN, self.spec.condition]
+
+    @staticmethod
+    def _check_kind(kind: str) -> None:
+        if kind not in KINDS:
+            raise ConfigError(f"unknown view kind {kind!r}; kinds: {', '.join(KINDS)}")
+
+    def _load(self, role: str, kind: str) -> Any:
+        self._check_kind(kind)
+        if role == "queries" and (self.spec.protocol == "revisit" or self.spec.condition.is_clean):
+            if (role, kind) not in self._views:  # same frames, same (clean) rendering
+                return self._load("database", kind)
+        if (role, kind) not in self._views:
+            if self.source is None:
+                raise DataError(f"task {self.spec.id} was built from arrays without {kind} views")
+            from safl_bench import mapcache
+
+            condition = CLEAN if role == "database" else self.spec.condition
+            frames = self.database_frames if role == "database" else self.query_frames
+            self._views[role, kind] = mapcache.load_views(
+                self.source,
+                self.spec.sequence,
+                self.spec.map_config,
+                frames=frames,
+                condition=condition,
+                seed=self.spec.seed,
+                kind=kind,
+                progress=self.progress,
+            )
+        return self._views[role, kind]
+
+    def info(self) -> dict[str, Any]:
+        """What a result record stores about the task: the spec, its fingerprint, the data."""
+        out: dict[str, Any] = self.spec.to_dict()
+        out["n_database"] = len(self.database_frames)
+        out["n_queries"] = len(self.query_frames)
+        if self.source is not None:
+            out["data_label"] = self.source.label
+            out["data_fingerprint"] = self.source.fingerprint(self.spec.sequence)
+        return out
