@@ -1,0 +1,132 @@
+"""Projection of a local map on the ground plane: top-view maps and viewpoint-frame points.
+
+A viewpoint is (x, y, yaw) in the world frame. The top view is `size` x `size` pixels of
+`cell_m` metres, centred on the viewpoint (the viewpoint sits at the corner shared by the four
+central pixels) and aligned with its heading:
+
+    row r    covers forward distance  x_v in [(size/2 - r - 1) * cell, (size/2 - r) * cell)
+    column c covers leftward distance y_v in [(size/2 - c - 1) * cell, (size/2 - c) * cell)
+
+so forward is up (row 0 is farthest ahead) and left is left (column 0 is farthest left).
+Turning the viewpoint left by 90 degrees turns the image clockwise: np.rot90(image, -1).
+
+Viewpoint noise (dx, dy, dtheta in the robot frame, `safl_bench.noise.sample_offsets`) moves
+the viewpoint before projection (`noisy_viewpoints`); finished images are never warped.
+
+Heights are measured above the ground under the robot (robot z - sensor_height_m); see
+`MapConfig` for the bands and the encodings. Several voxels falling in one pixel combine by max,
+so an obstacle anywhere in the pixel's column wins over ground.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from safl_bench.mapconfig import MapConfig
+
+UNKNOWN = 0.0
+HEIGHT_GROUND_VALUE = 0.25
+
+
+def pose_viewpoint(pose: np.ndarray) -> np.ndarray:
+    """(x, y, yaw) of a 4x4 pose."""
+    return np.array([pose[0, 3], pose[1, 3], math.atan2(pose[1, 0], pose[0, 0])])
+
+
+def noisy_viewpoints(viewpoints: np.ndarray, offsets: np.ndarray | None) -> np.ndarray:
+    """Move viewpoints (F, 3) by robot-frame offsets (F, 3) [dx forward, dy left, dtheta]."""
+    vp = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3)
+    if offsets is None:
+        return vp.copy()
+    off = np.asarray(offsets, dtype=np.float64).reshape(-1, 3)
+    c, s = np.cos(vp[:, 2]), np.sin(vp[:, 2])
+    return np.stack(
+        [
+            vp[:, 0] + c * off[:, 0] - s * off[:, 1],
+            vp[:, 1] + s * off[:, 0] + c * off[:, 1],
+            vp[:, 2] + off[:, 2],
+        ],
+        axis=1,
+    )
+
+
+def encode(centres: np.ndarray, robot_z: float, config: MapConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel values of occupied voxels: (xy (K, 2) float64, value (K,) float32).
+
+    Voxels below `min_height_m` or above `max_height_m` (above ground) are dropped.
+    """
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    h = centres[:, 2] - (robot_z - config.sensor_height_m)
+    keep = (h >= config.min_height_m) & (h <= config.max_height_m)
+    h = h[keep]
+    obstacle = h >= config.ground_clearance_m
+    if config.encoding == "height":
+        value = np.where(
+            obstacle, 0.5 + 0.5 * np.minimum(h / config.max_height_m, 1.0), HEIGHT_GROUND_VALUE
+        )
+    else:
+        value = np.where(obstacle, 1.0, config.ground_value)
+    return np.ascontiguousarray(centres[keep, :2]), value.astype(np.float32)
+
+
+@numba.njit(cache=True)
+def _render(xy, value, viewpoints, size, cell, out):
+    half = size / 2.0
+    inv = 1.0 / cell
+    for v in range(viewpoints.shape[0]):
+        vx = viewpoints[v, 0]
+        vy = viewpoints[v, 1]
+        c = math.cos(viewpoints[v, 2])
+        s = math.sin(viewpoints[v, 2])
+        img = out[v]
+        for i in range(xy.shape[0]):
+            dx = xy[i, 0] - vx
+            dy = xy[i, 1] - vy
+            fwd = c * dx + s * dy
+            left = -s * dx + c * dy
+            r = math.floor(half - fwd * inv)
+            col = math.floor(half - left * inv)
+            if 0 <= r < size and 0 <= col < size and value[i] > img[r, col]:
+                img[r, col] = value[i]
+
+
+def render(xy: np.ndarray, value: np.ndarray, viewpoints: np.ndarray, config: MapConfig) -> np.ndarray:
+    """Top views (V, size, size) float32 in [0, 1] of encoded voxels from viewpoints (V, 3)."""
+    vps = np.ascontiguousarray(np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3))
+    out = np.zeros((len(vps), config.size, config.size), dtype=np.float32)
+    if len(xy):
+        _render(
+            np.ascontiguousarray(xy, dtype=np.float64), np.ascontiguousarray(value, dtype=np.float32),
+            vps, config.size, config.cell_m, out,
+        )
+    return out
+
+
+def view_points(centres: np.ndarray, viewpoint: np.ndarray, robot_z: float) -> np.ndarray:
+    """Local-map points (M, 3) float32 in the viewpoint frame (x forward, y left, z up, origin
+    at the sensor height of the robot)."""
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    vx, vy, yaw = (float(v) for v in viewpoint)
+    c, s = math.cos(yaw), math.sin(yaw)
+    dx, dy = centres[:, 0] - vx, centres[:, 1] - vy
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, centres[:, 2] - robot_z], axis=1).astype(
+        np.float32
+    )
+
+
+def scan_topview(points: np.ndarray, config: MapConfig | None = None) -> np.ndarray:
+    """Top view (size, size) of one scan in its own sensor frame (no local map), for looking at.
+
+    Points are voxelised first, so the encoding matches the map-based views.
+    """
+    from safl_bench.localmap import keys_to_centres, voxel_keys
+
+    config = config or MapConfig()
+    pts = np.asarray(points)[:, :3]
+    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= config.radius_m]
+    centres = keys_to_centres(np.unique(voxel_keys(pts, config.voxel_m)), config.voxel_m)
+    xy, value = encode(centres, 0.0, config)
+    return render(xy, value, np.zeros((1, 3)), config)[0]
