@@ -1,17 +1,88 @@
-"""`safl-bench leaderboard`: not available yet (issue #6)."""
+"""`safl-bench leaderboard`: regenerate the leaderboard's tables and figures from result records.
+
+Defaults make the leaderboard directory self-contained: it holds its records (records/) and
+training logs (training-logs/) beside the generated tables and figures, so running the command
+at the root of a safl-bench checkout rebuilds the committed leaderboard exactly.
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
-from safl_bench.errors import SaflError
+from safl_bench.leaderboard import build_leaderboard
+from safl_bench.records import load_records
 
-HELP = "(not available yet: issue #6)"
+HELP = "regenerate the leaderboard (Markdown/CSV tables and PNG figures) from result records"
+
+
+def default_out_dir(cwd: Path | None = None) -> Path:
+    """leaderboard/ of the enclosing safl-bench checkout if there is one, else ./leaderboard."""
+    here = (cwd or Path.cwd()).resolve()
+    for directory in (here, *here.parents):
+        pyproject = directory / "pyproject.toml"
+        if pyproject.is_file() and _is_safl_bench(pyproject):
+            return directory / "leaderboard"
+    return here / "leaderboard"
+
+
+def _is_safl_bench(pyproject: Path) -> bool:
+    try:
+        text = pyproject.read_text(encoding="utf-8")
+    except OSError:
+        return False
+    return 'name = "safl-bench"' in text
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No arguments until the command lands."""
+    """--results, --out, --training-logs, --no-figures."""
+    parser.add_argument(
+        "--out",
+        metavar="DIR",
+        help="leaderboard directory to regenerate (default: leaderboard/ of the safl-bench "
+        "checkout you are in, else ./leaderboard)",
+    )
+    parser.add_argument(
+        "--results",
+        metavar="DIR",
+        help="result records to build from (default: OUT/records, the leaderboard's own records)",
+    )
+    parser.add_argument(
+        "--training-logs",
+        metavar="DIR",
+        help="training logs DIR/<method>/train_log.jsonl for the training-stability figure "
+        "(default: OUT/training-logs)",
+    )
+    parser.add_argument(
+        "--no-figures", action="store_true", help="write the tables only (faster; no PNGs)"
+    )
 
 
 def main(args: argparse.Namespace) -> int:
-    raise SaflError("this command is not available yet (issue #6)")
+    out = Path(args.out) if args.out else default_out_dir()
+    results = Path(args.results) if args.results else out / "records"
+    logs = Path(args.training_logs) if args.training_logs else out / "training-logs"
+    records, problems = load_records(results)
+    for problem in problems:
+        print(f"safl-bench: warning: skipped record {problem}", file=sys.stderr)
+    report = build_leaderboard(
+        records,
+        out,
+        training_logs=logs,
+        skipped=problems,
+        skipped_base=results,
+        figures=not args.no_figures,
+    )
+    for problem in report.problems:
+        if problem not in problems:
+            print(f"safl-bench: warning: {problem}", file=sys.stderr)
+    print(
+        f"leaderboard: {len(records)} records from {results} -> {out} "
+        f"({len(report.written)} files written, {len(report.removed)} stale files removed)"
+    )
+    if report.headline is not None:
+        print()
+        print(report.headline.markdown(level=3), end="")
+    print(f"\nindex: {out / 'index.md'}")
+    return 0

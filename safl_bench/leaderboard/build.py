@@ -1,0 +1,281 @@
+"""Regenerate a leaderboard directory from result records.
+
+Layout of the output directory (everything but README.md, records/ and training-logs/ is
+generated and overwritten; generated files that a regeneration no longer produces are removed):
+
+    index.md                                  links, headline table, skipped files
+    tables/all-results.csv                    every record and matching mode, long format
+    tables/<source>/paper-<seq>-v<N>-recall.{md,csv}   Table II (recall at 100 % precision)
+    tables/<source>/paper-<seq>-v<N>-auc.{md,csv}      ROC AUC (Figure 13 as numbers)
+    tables/<source>/paper-<seq>-v<N>-time.{md,csv}     Table III (ms per frame)
+    tables/<source>/revisit-v<N>.{md,csv}              revisit protocol
+    figures/<source>/paper-<seq>-v<N>-auc-heatmap.png  Figure 13
+    figures/<source>/paper-<seq>-v<N>-pr-<method>-v<version>.png   Figures 10–12
+    figures/<source>/revisit-v<N>-pr.png
+    figures/training-stability-<source>.png            Figure 14 (from training logs)
+"""
+
+from __future__ import annotations
+
+import os
+from collections import defaultdict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+
+from safl_bench.atomic import atomic_write_text
+from safl_bench.errors import DataError
+from safl_bench.leaderboard import figures as figs
+from safl_bench.leaderboard.grouping import TableKey, group_records, slugify
+from safl_bench.leaderboard.tables import (
+    Table,
+    all_results_frame,
+    auc_table,
+    frame_csv,
+    recall_table,
+    revisit_table,
+    time_table,
+)
+from safl_bench.leaderboard.training_logs import TrainingLog, load_training_logs
+from safl_bench.records import Problem, ResultRecord
+
+GENERATED_DIRS = ("tables", "figures")
+GENERATED_SUFFIXES = (".md", ".csv", ".png")
+UNKNOWN_SOURCE = "data source not recorded in the log"
+
+
+@dataclass
+class BuildReport:
+    """What a regeneration wrote, removed and could not use."""
+
+    out_dir: Path
+    written: list[Path] = field(default_factory=list)
+    removed: list[Path] = field(default_factory=list)
+    problems: list[Problem] = field(default_factory=list)
+    headline: Table | None = None
+
+
+@dataclass
+class _Entry:
+    """Links of one table group for the index."""
+
+    key: TableKey
+    tables: list[tuple[str, str]] = field(default_factory=list)  # (label, md path)
+    figures: list[tuple[str, str]] = field(default_factory=list)  # (label, png path)
+
+
+class _Writer:
+    def __init__(self, out: Path, report: BuildReport) -> None:
+        self.out = out
+        self.report = report
+
+    def text(self, rel: str, content: str) -> str:
+        path = self.out / rel
+        if not (path.is_file() and path.read_text(encoding="utf-8") == content):
+            atomic_write_text(path, content)
+        self.report.written.append(path)
+        return rel
+
+    def figure(self, rel: str, draw: Callable[[Path], None]) -> str:
+        path = self.out / rel
+        draw(path)
+        self.report.written.append(path)
+        return rel
+
+
+def build_leaderboard(
+    records: Sequence[ResultRecord],
+    out_dir: str | os.PathLike[str],
+    *,
+    training_logs: str | os.PathLike[str] | None = None,
+    skipped: Sequence[Problem] = (),
+    skipped_base: str | os.PathLike[str] | None = None,
+    figures: bool = True,
+) -> BuildReport:
+    """Write the leaderboard for `records` into `out_dir` (see the module docstring).
+
+    `skipped` lists record files the caller could not load; they are named in index.md
+    (relative to `skipped_base` when given). Raises DataError when there are no records, so an
+    empty results directory never wipes a leaderboard.
+    """
+    if not records:
+        raise DataError(
+            f"no result records to build the leaderboard in {out_dir} from; "
+            "run `safl-bench run` first or pass --results DIR"
+        )
+    out = Path(out_dir)
+    report = BuildReport(out_dir=out)
+    writer = _Writer(out, report)
+    groups, group_notes = group_records(records)
+    entries: list[_Entry] = []
+    for key, group in groups.items():
+        notes = group_notes.get(key, [])
+        base = f"{key.source_slug}/{key.stem}"
+        entry = _Entry(key)
+        if key.protocol == "paper":
+            recall = recall_table(key, group, notes)
+            auc = auc_table(key, group, notes)
+            timing = time_table(key, group, notes)
+            heatmap = f"figures/{base}-auc-heatmap.png"
+            for label, table, stem in (
+                ("Recall at 100 % precision (Table II)", recall, "recall"),
+                ("ROC AUC (Figure 13)", auc, "auc"),
+                ("ms per frame (Table III)", timing, "time"),
+            ):
+                md = table.markdown(level=1)
+                if stem == "auc" and figures:
+                    md += f"\n![AUC heat map](../../{heatmap})\n"
+                entry.tables.append((label, writer.text(f"tables/{base}-{stem}.md", md)))
+                writer.text(f"tables/{base}-{stem}.csv", table.csv())
+            if report.headline is None or _headline_rank(key) < _headline_rank(report.headline.key):
+                report.headline = recall
+            if figures:
+                entry.figures.append(
+                    ("AUC heat map", writer.figure(heatmap, partial(figs.auc_heatmap, auc)))
+                )
+                by_method: dict[tuple[str, str], list[ResultRecord]] = defaultdict(list)
+                for record in group:
+                    by_method[(record.method.name, record.method.version)].append(record)
+                for (name, version), recs in sorted(by_method.items()):
+                    rel = f"figures/{base}-pr-{slugify(name)}-v{slugify(version)}.png"
+                    entry.figures.append(
+                        (
+                            f"PR curves {name} v{version}",
+                            writer.figure(rel, partial(figs.pr_figure, key, name, version, recs)),
+                        )
+                    )
+        else:
+            table = revisit_table(key, group, notes)
+            entry.tables.append(
+                (
+                    "F1max, recall at 100 % precision, AUC",
+                    writer.text(f"tables/{base}.md", table.markdown(level=1)),
+                )
+            )
+            writer.text(f"tables/{base}.csv", table.csv())
+            if figures:
+                rel = f"figures/{base}-pr.png"
+                entry.figures.append(
+                    ("PR curves", writer.figure(rel, partial(figs.revisit_pr_figure, key, group)))
+                )
+        entries.append(entry)
+
+    writer.text("tables/all-results.csv", frame_csv(all_results_frame(records)))
+
+    training: list[tuple[str, str, list[str]]] = []
+    if training_logs is not None:
+        logs, log_problems = load_training_logs(training_logs)
+        report.problems.extend(log_problems)
+        if figures:
+            by_source: dict[str, list[TrainingLog]] = defaultdict(list)
+            for log in logs:
+                by_source[log.source or UNKNOWN_SOURCE].append(log)
+            for source, source_logs in sorted(by_source.items()):
+                rel = f"figures/training-stability-{slugify(source)}.png"
+                writer.figure(rel, partial(figs.training_figure, source_logs, source))
+                training.append((source, rel, [log.method for log in source_logs]))
+
+    report.problems.extend(skipped)
+    index = _index(records, entries, report.headline, training, skipped, skipped_base, figures)
+    writer.text("index.md", index)
+    report.removed = _remove_stale(out, report.written)
+    return report
+
+
+def _headline_rank(key: TableKey) -> tuple[object, ...]:
+    """Headline = paper protocol on the synthetic default first, lowest sequence, newest version."""
+    return (key.source_kind != "synth", key.source_label, key.sequence, -key.task_version)
+
+
+def _index(
+    records: Sequence[ResultRecord],
+    entries: list[_Entry],
+    headline: Table | None,
+    training: list[tuple[str, str, list[str]]],
+    skipped: Sequence[Problem],
+    skipped_base: str | os.PathLike[str] | None,
+    figures: bool,
+) -> str:
+    lines = [
+        "# safl-bench leaderboard",
+        "",
+        f"Regenerated by `safl-bench leaderboard` from {len(records)} result records; do not edit "
+        "by hand. [README.md](README.md) says how to add a method's results and how cells are "
+        "combined.",
+        "",
+        "Matching: *sequence* = the shared SeqSLAM sequence matcher (paper §II.D); *single-frame* = "
+        "the best single database frame for each query. Missing cells show —.",
+        "",
+    ]
+    if headline is not None:
+        lines += ["## Headline", "", headline.markdown(level=3), ""]
+    current_source = None
+    for entry in entries:
+        key = entry.key
+        if key.source_label != current_source:
+            current_source = key.source_label
+            lines += [f"## {key.source_label}", ""]
+        what = (
+            f"Paper protocol, sequence {key.sequence}"
+            if key.protocol == "paper"
+            else f"{key.protocol.capitalize()} protocol"
+        )
+        lines += [f"### {what}, task version v{key.task_version}", ""]
+        lines.append(
+            "- Tables: "
+            + " · ".join(f"[{label}]({md}) ([CSV]({md[:-3]}.csv))" for label, md in entry.tables)
+        )
+        if entry.figures:
+            lines.append(
+                "- Figures: " + " · ".join(f"[{label}]({png})" for label, png in entry.figures)
+            )
+        lines.append("")
+    if figures:
+        lines += ["## Training stability (Figure 14)", ""]
+        if training:
+            lines += [
+                f"- [{source}]({rel}): {', '.join(methods)}" for source, rel, methods in training
+            ]
+        else:
+            lines.append("- No training logs were found.")
+        lines.append("")
+    lines += [
+        "## All results",
+        "",
+        "- [tables/all-results.csv](tables/all-results.csv): one row per record and matching mode, "
+        "with every metric, timing and the git revision.",
+        "",
+    ]
+    if skipped:
+        lines += ["## Skipped record files", ""]
+        for problem in skipped:
+            lines.append(f"- `{_relative(problem.path, skipped_base)}`: {problem.reason}")
+        lines.append("")
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _relative(path: Path, base: str | os.PathLike[str] | None) -> str:
+    if base is None:
+        return str(path)
+    try:
+        return str(Path(path).relative_to(base))
+    except ValueError:
+        return str(path)
+
+
+def _remove_stale(out: Path, written: list[Path]) -> list[Path]:
+    keep = {p.resolve() for p in written}
+    removed: list[Path] = []
+    for sub in GENERATED_DIRS:
+        root = out / sub
+        if not root.is_dir():
+            continue
+        for path in sorted(root.rglob("*")):
+            if path.is_file() and path.suffix in GENERATED_SUFFIXES and path.resolve() not in keep:
+                path.unlink()
+                removed.append(path)
+        for directory in sorted((d for d in root.rglob("*") if d.is_dir()), reverse=True):
+            if not any(directory.iterdir()):
+                directory.rmdir()
+    return removed

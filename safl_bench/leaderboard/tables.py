@@ -1,0 +1,434 @@
+"""Leaderboard tables built from result records, rendered as Markdown and CSV.
+
+Shapes follow the paper: Table II (recall at 100 % precision, rows = methods, columns = the
+twelve noise conditions), the AUC table of Figure 13, Table III (feature inference time in ms per
+frame), plus the revisit-protocol table (F1max, recall at 100 % precision and AUC per sequence).
+Each method has one row per matching mode ("sequence" = SeqSLAM, "single-frame" = nearest
+neighbour), so a reader sees what the sequence matcher adds. Output is deterministic: rows are
+sorted, floats have a fixed number of decimals, and nothing depends on the clock or the machine.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+from collections import defaultdict
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from safl_bench.leaderboard.grouping import (
+    Cell,
+    TableKey,
+    aggregate,
+    condition_order,
+    format_seeds,
+    seed_set,
+)
+from safl_bench.records import MODES, Metrics, ResultRecord
+
+MISSING = "—"
+UNDEFINED = "n/a"
+MODE_LABELS = {"sequence": "sequence", "single_frame": "single-frame"}
+
+
+@dataclass(frozen=True)
+class ValueFormat:
+    """How a column's values are shown: multiplied by `scale`, `decimals` digits.
+
+    `better` ("higher" or "lower") makes the Markdown bold the best value of each column among
+    rows of the same matching mode; None bolds nothing.
+    """
+
+    scale: float = 1.0
+    decimals: int = 1
+    better: str | None = None
+
+    def number(self, value: float) -> str:
+        return f"{value * self.scale:.{self.decimals}f}"
+
+
+RowKey = tuple[str, str, str]  # (method, method version, matching mode or "")
+
+
+@dataclass
+class Table:
+    """A rendered-ready table: row labels, columns, one Cell (or None = missing) per position."""
+
+    title: str
+    key: TableKey
+    row_header: tuple[str, str, str]
+    rows: list[RowKey]
+    columns: list[str]
+    formats: list[ValueFormat]
+    cells: list[list[Cell | None]]
+    seeds: frozenset[int]
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def heading(self) -> str:
+        """The heading line: what the values are and which data they come from."""
+        return f"{self.title} — {self.key.caption}"
+
+    def cell_text(self, cell: Cell | None, fmt: ValueFormat) -> str:
+        if cell is None:
+            return MISSING
+        if cell.mean is None:
+            return UNDEFINED
+        text = fmt.number(cell.mean)
+        if cell.std is not None:
+            text += f" ± {fmt.number(cell.std)}"
+        return text
+
+    def _best(self) -> set[tuple[int, int]]:
+        """Positions (row, column) of each column's best shown value per matching mode."""
+        best: set[tuple[int, int]] = set()
+        for j, fmt in enumerate(self.formats):
+            if fmt.better is None:
+                continue
+            by_group: dict[str, list[tuple[float, int]]] = defaultdict(list)
+            for i, row in enumerate(self.rows):
+                cell = self.cells[i][j]
+                if cell is not None and cell.mean is not None:
+                    by_group[row[2]].append((float(fmt.number(cell.mean)), i))
+            for entries in by_group.values():
+                if len(entries) < 2:
+                    continue
+                values = [v for v, _ in entries]
+                target = max(values) if fmt.better == "higher" else min(values)
+                best.update((i, j) for v, i in entries if v == target)
+        return best
+
+    def markdown(self, level: int = 2) -> str:
+        """The table as Markdown: heading, seeds line, table, notes."""
+        best = self._best()
+        show_header = [h for h in self.row_header if h]
+        lines = [f"{'#' * level} {self.heading}", ""]
+        lines.append(_seeds_sentence(self.seeds))
+        lines.append("")
+        lines.append("| " + " | ".join([*show_header, *map(_md, self.columns)]) + " |")
+        lines.append("|" + "---|" * len(show_header) + "---:|" * len(self.columns))
+        for i, row in enumerate(self.rows):
+            labels = [_md(v) for v, h in zip(row, self.row_header, strict=True) if h]
+            values = []
+            for j, fmt in enumerate(self.formats):
+                text = self.cell_text(self.cells[i][j], fmt)
+                values.append(f"**{text}**" if (i, j) in best else text)
+            lines.append("| " + " | ".join([*labels, *values]) + " |")
+        if self.notes:
+            lines.append("")
+            lines.extend(f"- {note}" for note in self.notes)
+        return "\n".join(lines) + "\n"
+
+    def frame(self) -> pd.DataFrame:
+        """The table as a DataFrame of strings (CSV form): numbers without units, '' = missing."""
+        multi = len(self.seeds) > 1
+        data: dict[str, list[str]] = {
+            "Source": [self.key.source_label] * len(self.rows),
+            "Protocol": [self.key.protocol] * len(self.rows),
+            "Sequence": [self.key.sequence] * len(self.rows),
+            "Task version": [str(self.key.task_version)] * len(self.rows),
+        }
+        for h, idx in zip(self.row_header, range(3), strict=True):
+            if h:
+                data[h] = [row[idx] for row in self.rows]
+        for j, (column, fmt) in enumerate(zip(self.columns, self.formats, strict=True)):
+            cells = [self.cells[i][j] for i in range(len(self.rows))]
+            data[column] = [_csv_value(c, fmt, "mean") for c in cells]
+            if multi:
+                data[f"{column} std"] = [_csv_value(c, fmt, "std") for c in cells]
+        data["Seeds"] = [format_seeds(self.seeds)] * len(self.rows)
+        return pd.DataFrame(data)
+
+    def csv(self) -> str:
+        """The table as CSV text ('\\n' line ends)."""
+        return frame_csv(self.frame())
+
+
+def _md(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def _csv_value(cell: Cell | None, fmt: ValueFormat, which: str) -> str:
+    if cell is None:
+        return ""
+    if cell.mean is None:
+        return UNDEFINED
+    value = cell.mean if which == "mean" else cell.std
+    return "" if value is None else fmt.number(value)
+
+
+def _seeds_sentence(seeds: frozenset[int]) -> str:
+    if len(seeds) == 1:
+        return f"Seed {format_seeds(seeds)}. Missing cells (not run) show {MISSING}."
+    return (
+        f"Mean ± sample standard deviation over seeds {format_seeds(seeds)}; a cell lacking any "
+        f"of these seeds shows {MISSING} (never an average over fewer runs)."
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Building tables from records
+
+
+def _version_key(version: str) -> tuple[int, ...] | tuple[str]:
+    parts = re.split(r"[.\-]", version)
+    return tuple(int(p) for p in parts) if all(p.isdigit() for p in parts) else (version,)
+
+
+def _row_sort_key(row: RowKey) -> tuple[object, ...]:
+    mode_rank = MODES.index(row[2]) if row[2] in MODES else -1
+    return (row[0], _version_key(row[1]), row[1], mode_rank)
+
+
+Extractor = Callable[[ResultRecord], Iterable[tuple[RowKey, str, float | None]]]
+
+
+def _build(
+    key: TableKey,
+    records: list[ResultRecord],
+    *,
+    title: str,
+    row_header: tuple[str, str, str],
+    columns: list[str],
+    formats: list[ValueFormat],
+    extract: Extractor,
+    notes: Iterable[str] = (),
+) -> Table:
+    seeds = seed_set(records)
+    values: dict[tuple[RowKey, str], dict[int, float | None]] = defaultdict(dict)
+    for record in records:
+        for row, column, value in extract(record):
+            values[(row, column)][record.seed] = value
+    rows = sorted({row for row, _ in values}, key=_row_sort_key)
+    cells = [[aggregate(values.get((row, c), {}), seeds) for c in columns] for row in rows]
+    gaps: dict[tuple[RowKey, tuple[int, ...]], list[str]] = defaultdict(list)
+    for row in rows:
+        for column in columns:
+            have = values.get((row, column))
+            if have and set(have) != seeds:
+                gaps[(row, tuple(sorted(seeds - set(have))))].append(column)
+    all_notes = list(notes)
+    for (row, missing), cols in sorted(
+        gaps.items(), key=lambda kv: (_row_sort_key(kv[0][0]), kv[0][1])
+    ):
+        label = " ".join(
+            part for part in (row[0], f"v{row[1]}", MODE_LABELS.get(row[2], row[2])) if part
+        )
+        all_notes.append(
+            f"{label}: {', '.join(cols)} lack seed(s) {format_seeds(missing)}, so they show "
+            f"{MISSING}; run them to fill the cells."
+        )
+    all_notes.extend(_matcher_notes(records))
+    return Table(
+        title=title,
+        key=key,
+        row_header=row_header,
+        rows=rows,
+        columns=columns,
+        formats=formats,
+        cells=cells,
+        seeds=seeds,
+        notes=all_notes,
+    )
+
+
+def _matcher_notes(records: list[ResultRecord]) -> list[str]:
+    configs = sorted({json.dumps(r.matcher, sort_keys=True) for r in records})
+    if len(configs) == 1:
+        settings = ", ".join(
+            f"{k}={json.dumps(v)}" for k, v in sorted(json.loads(configs[0]).items())
+        )
+        return [f"Matcher settings (all rows): {settings or 'defaults'}."]
+    return [
+        f"Matcher settings differ between records ({len(configs)} configurations); "
+        "see all-results.csv before comparing rows."
+    ]
+
+
+def _metric(name: str) -> Callable[[Metrics], float | None]:
+    def get(metrics: Metrics) -> float | None:
+        value: float | None = getattr(metrics, name)
+        return value
+
+    return get
+
+
+RECALL_FORMAT = ValueFormat(scale=100.0, decimals=1, better="higher")
+AUC_FORMAT = ValueFormat(scale=1.0, decimals=3, better="higher")
+F1_FORMAT = ValueFormat(scale=1.0, decimals=3, better="higher")
+MS_FORMAT = ValueFormat(scale=1.0, decimals=2, better=None)
+
+
+def paper_metric_table(
+    key: TableKey,
+    records: list[ResultRecord],
+    *,
+    metric: str,
+    title: str,
+    fmt: ValueFormat,
+    notes: Iterable[str] = (),
+) -> Table:
+    """Rows = (method, version, matching mode), columns = noise conditions, values = `metric`."""
+    get = _metric(metric)
+    columns = condition_order(r.task.condition or "" for r in records)
+
+    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+        for mode, result in record.results.items():
+            row = (record.method.name, record.method.version, mode)
+            yield row, record.task.condition or "", get(result.metrics)
+
+    table = _build(
+        key,
+        records,
+        title=title,
+        row_header=("Method", "Version", "Matching"),
+        columns=columns,
+        formats=[fmt] * len(columns),
+        extract=extract,
+        notes=notes,
+    )
+    return _label_modes(table)
+
+
+def recall_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """The paper's Table II: recall at 100 % precision (%) per method and condition."""
+    return paper_metric_table(
+        key,
+        records,
+        metric="recall_at_100_precision",
+        title="Recall at 100 % precision (%)",
+        fmt=RECALL_FORMAT,
+        notes=notes,
+    )
+
+
+def auc_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """The AUC of the ROC curve per method and condition (the paper's Figure 13 as a table)."""
+    return paper_metric_table(
+        key, records, metric="auc", title="ROC AUC", fmt=AUC_FORMAT, notes=notes
+    )
+
+
+def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """The paper's Table III: feature inference time per frame (ms, batch 1, median)."""
+    columns = condition_order(r.task.condition or "" for r in records)
+
+    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+        row = (record.method.name, record.method.version, "")
+        yield row, record.task.condition or "", record.timings.describe_ms_per_frame
+
+    machines = sorted(
+        {f"{r.environment.cpu_model} ({r.environment.cpu_cores} cores)" for r in records}
+    )
+    how = sorted({r.timings.how_run for r in records})
+    extra = [
+        "Describing one map at a time (batch 1), median over repeats; matching time excluded.",
+        f"Measured on: {'; '.join(machines)}. Runs: {'; '.join(how)}.",
+    ]
+    if len(machines) > 1:
+        extra.append("Rows were timed on different machines: compare them with care.")
+    return _build(
+        key,
+        records,
+        title="Feature inference time per frame (ms)",
+        row_header=("Method", "Version", ""),
+        columns=columns,
+        formats=[MS_FORMAT] * len(columns),
+        extract=extract,
+        notes=[*notes, *extra],
+    )
+
+
+REVISIT_METRICS: tuple[tuple[str, str, ValueFormat], ...] = (
+    ("f1_max", "F1max", F1_FORMAT),
+    ("recall_at_100_precision", "R@100P (%)", RECALL_FORMAT),
+    ("auc", "AUC", AUC_FORMAT),
+)
+
+
+def revisit_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """Revisit protocol: F1max, recall at 100 % precision and AUC per method and sequence."""
+    sequences = sorted({r.task.sequence for r in records})
+    columns: list[str] = []
+    formats: list[ValueFormat] = []
+    for sequence in sequences:
+        for _, label, fmt in REVISIT_METRICS:
+            columns.append(f"{sequence} {label}")
+            formats.append(fmt)
+
+    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+        for mode, result in record.results.items():
+            row = (record.method.name, record.method.version, mode)
+            for metric, label, _ in REVISIT_METRICS:
+                yield row, f"{record.task.sequence} {label}", _metric(metric)(result.metrics)
+
+    table = _build(
+        key,
+        records,
+        title="Revisit protocol: F1max, recall at 100 % precision, AUC",
+        row_header=("Method", "Version", "Matching"),
+        columns=columns,
+        formats=formats,
+        extract=extract,
+        notes=notes,
+    )
+    return _label_modes(table)
+
+
+def _label_modes(table: Table) -> Table:
+    """Show matching modes by their reader-facing names ('single-frame')."""
+    table.rows = [(m, v, MODE_LABELS.get(mode, mode)) for m, v, mode in table.rows]
+    return table
+
+
+def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
+    """Every record and matching mode as one row with all metrics and timings (long format)."""
+    rows = []
+    for r in sorted(records, key=lambda rec: rec.key):
+        for mode in sorted(r.results, key=MODES.index):
+            m = r.results[mode].metrics
+            rows.append(
+                {
+                    "source": r.task.source_label,
+                    "source_kind": r.task.source_kind,
+                    "protocol": r.task.protocol,
+                    "task": r.task.id,
+                    "task_version": r.task.version,
+                    "sequence": r.task.sequence,
+                    "condition": r.task.condition or "",
+                    "spec_fingerprint": r.task.spec_fingerprint,
+                    "method": r.method.name,
+                    "method_version": r.method.version,
+                    "seed": r.seed,
+                    "matching": MODE_LABELS[mode],
+                    "recall_at_100_precision": _num(m.recall_at_100_precision, 4),
+                    "auc": _num(m.auc, 4),
+                    "f1_max": _num(m.f1_max, 4),
+                    "extended_precision": _num(m.extended_precision, 4),
+                    "n_queries": m.n_queries,
+                    "n_positives": m.n_positives,
+                    "describe_ms_per_frame": _num(r.timings.describe_ms_per_frame, 3),
+                    "describe_frames_per_s": _num(r.timings.describe_frames_per_s, 1),
+                    "matcher_s": _num(r.timings.matcher_s, 3),
+                    "peak_memory_mb": _num(r.timings.peak_memory_mb, 1),
+                    "how_run": r.timings.how_run,
+                    "matcher": json.dumps(r.matcher, sort_keys=True),
+                    "cpu": r.environment.cpu_model,
+                    "git_revision": r.environment.git_revision,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def _num(value: float | None, decimals: int) -> str:
+    return UNDEFINED if value is None else f"{value:.{decimals}f}"
+
+
+def frame_csv(frame: pd.DataFrame) -> str:
+    """CSV text of a frame ('\\n' line ends, no index)."""
+    buffer = io.StringIO()
+    frame.to_csv(buffer, index=False, lineterminator="\n")
+    return buffer.getvalue()
