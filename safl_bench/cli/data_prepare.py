@@ -1,17 +1,73 @@
-"""`safl-bench data prepare`: not available yet (issue #2)."""
+"""`safl-bench data prepare`: build and cache top-view maps (clean + noise conditions)."""
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
-from safl_bench.errors import SaflError
+from safl_bench.errors import ConfigError
+from safl_bench.mapbuild import DEFAULT_STEP, KINDS, select_frames
+from safl_bench.mapconfig import BACKENDS, ENCODINGS, MapConfig
+from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition
 
-HELP = "(not available yet: issue #2)"
+HELP = "build and cache the top-view maps of sequences (synthetic default or --kitti-root)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No arguments until the command lands."""
+    """Flags of `data prepare`."""
+    parser.add_argument("--kitti-root", metavar="DIR", default=None,
+                        help="KITTI odometry root (default: the synthetic default, generated if missing)")
+    parser.add_argument("--sequences", nargs="+", metavar="XX", default=None,
+                        help="sequences to prepare (default: the synthetic test sequences 00 09)")
+    parser.add_argument("--step", type=int, default=DEFAULT_STEP,
+                        help=f"use every STEP-th frame (default {DEFAULT_STEP}, as the paper's code)")
+    parser.add_argument("--backend", choices=BACKENDS, default=MapConfig.backend,
+                        help="local-map backend (default: %(default)s)")
+    parser.add_argument("--encoding", choices=ENCODINGS, default=MapConfig.encoding,
+                        help="top-view encoding (default: %(default)s)")
+    parser.add_argument("--conditions", nargs="+", metavar="COND", default=["paper"],
+                        help="'paper' (clean + the 12 conditions), 'clean', or names like T1R1 "
+                             "(default: paper)")
+    parser.add_argument("--kinds", nargs="+", choices=KINDS, default=["topview"],
+                        help="views to cache (default: topview)")
+    parser.add_argument("--seed", type=int, default=0, help="noise seed and synthetic seed (default 0)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def parse_conditions(names: list[str]) -> list[Condition]:
+    """'paper' -> clean + 12 paper conditions; 'clean'; 'T{a}R{b}'. Order kept, no repeats."""
+    out: list[Condition] = []
+    for name in names:
+        if name == "paper":
+            out += [CLEAN, *PAPER_CONDITIONS]
+        elif name == "clean":
+            out.append(CLEAN)
+        else:
+            out.append(Condition.parse(name))
+    return list(dict.fromkeys(out))
 
 
 def main(args: argparse.Namespace) -> int:
-    raise SaflError("this command is not available yet (issue #2)")
+    from safl_bench.datasource import resolve_source
+    from safl_bench.mapcache import prepare
+
+    if args.step < 1:
+        raise ConfigError(f"--step must be >= 1, got {args.step}")
+    conditions = parse_conditions(args.conditions)
+    config = replace(MapConfig(), backend=args.backend, encoding=args.encoding)
+    source = resolve_source(args.kitti_root, sequences=args.sequences, seed=args.seed,
+                            progress=not args.quiet)
+    sequences = args.sequences
+    if sequences is None:
+        from safl_bench import synth
+
+        sequences = list(synth.TEST_SEQUENCES)
+    for name in sequences:
+        seq = source.sequence(name)
+        frames = select_frames(len(seq), args.step)
+        paths = prepare(source, name, config, frames=frames, conditions=conditions,
+                        seed=args.seed, kinds=args.kinds, progress=not args.quiet)
+        folder = next(iter(paths.values())).parent
+        print(f"{source.label} sequence {name}: {len(frames)} frames x {len(conditions)} conditions "
+              f"x {len(args.kinds)} kinds cached in {folder}")
+    return 0

@@ -1,0 +1,136 @@
+"""On-disk cache of rendered views, keyed by everything that changes them.
+
+Key: (source fingerprint, sequence, MapConfig, frames, condition, seed, kind). The seed only
+matters for noisy conditions, so clean views are shared by all seeds. Files live under
+`paths.map_cache_dir()/<source kind>-<sequence>/` as compressed `.npz`, written atomically:
+
+    topview-<condition>-<key>.npz   maps (F, size, size) float32, meta (JSON)
+    points-<condition>-<key>.npz    points (sum M_i, 3) float32, offsets (F + 1,) int64, meta
+
+Tasks call `load_views`; `prepare` renders many conditions and kinds in one pass over the scans.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from safl_bench.atomic import atomic_path
+from safl_bench.datasource import DataSource
+from safl_bench.errors import ConfigError
+from safl_bench.fingerprint import fingerprint, to_jsonable
+from safl_bench.mapbuild import KINDS, build_views, check_frames
+from safl_bench.mapconfig import MapConfig
+from safl_bench.noise import Condition, sample_offsets
+from safl_bench.paths import map_cache_dir
+
+CACHE_VERSION = 1  # bump when the rendering code changes what a key's file holds
+
+
+def cache_key(
+    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    condition: Condition, seed: int, kind: str,
+) -> str:
+    """The cache key of one set of views."""
+    return fingerprint(
+        CACHE_VERSION, source.fingerprint(sequence), str(sequence), config,
+        np.asarray(frames, dtype=np.int64), condition, None if condition.is_clean else int(seed), kind,
+    )
+
+
+def cache_path(
+    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    condition: Condition, seed: int, kind: str,
+) -> Path:
+    """Where the views of that key are (or will be) cached."""
+    key = cache_key(source, sequence, config, frames, condition, seed, kind)
+    return map_cache_dir() / f"{source.kind}-{sequence}" / f"{kind}-{condition.name}-{key}.npz"
+
+
+def _meta(source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+          condition: Condition, seed: int, kind: str) -> str:
+    return json.dumps(to_jsonable({
+        "source": source.label, "root": str(source.root), "sequence": sequence, "config": config,
+        "frames": len(frames), "condition": condition.name, "seed": seed, "kind": kind,
+        "version": CACHE_VERSION,
+    }), sort_keys=True)
+
+
+def _save(path: Path, views: np.ndarray | list[np.ndarray], meta: str) -> None:
+    with atomic_path(path) as tmp:
+        if isinstance(views, np.ndarray):
+            np.savez_compressed(tmp, maps=views.astype(np.float32), meta=np.array(meta))
+        else:
+            lengths = np.array([len(v) for v in views], dtype=np.int64)
+            offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+            points = np.concatenate(views).astype(np.float32) if views else np.zeros((0, 3), np.float32)
+            np.savez_compressed(tmp, points=points, offsets=offsets, meta=np.array(meta))
+
+
+def _load(path: Path, kind: str) -> np.ndarray | list[np.ndarray]:
+    with np.load(path) as data:
+        if kind == "topview":
+            return np.asarray(data["maps"], dtype=np.float32)
+        points, offsets = data["points"], data["offsets"]
+        return [points[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in KINDS:
+        raise ConfigError(f"view kind must be one of {', '.join(KINDS)}, got {kind!r}")
+
+
+def prepare(
+    source: DataSource,
+    sequence: str,
+    config: MapConfig,
+    *,
+    frames: np.ndarray,
+    conditions: Iterable[Condition],
+    seed: int,
+    kinds: Sequence[str] = ("topview",),
+    progress: bool = True,
+) -> dict[tuple[Condition, str], Path]:
+    """Make sure the views of every (condition, kind) are cached; render the missing ones in
+    one pass over the scans. Returns {(condition, kind): cache file}."""
+    sequence = str(sequence)
+    conds = list(dict.fromkeys(conditions))
+    for kind in kinds:
+        _check_kind(kind)
+    seq = source.sequence(sequence)
+    frames = check_frames(frames, len(seq), sequence)
+    paths = {(c, k): cache_path(source, sequence, config, frames, c, seed, k) for c in conds for k in kinds}
+    missing = [ck for ck, p in paths.items() if not p.is_file()]
+    if missing:
+        todo_conds = list(dict.fromkeys(c for c, _ in missing))
+        todo_kinds = [k for k in kinds if any(kk == k for _, kk in missing)]
+        offsets = {
+            c.name: None if c.is_clean else sample_offsets(len(frames), c, seed) for c in todo_conds
+        }
+        views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
+        for c, k in missing:
+            _save(paths[c, k], views[c.name, k], _meta(source, sequence, config, frames, c, seed, k))
+    return paths
+
+
+def load_views(
+    source: DataSource,
+    sequence: str,
+    config: MapConfig,
+    *,
+    frames: np.ndarray,
+    condition: Condition,
+    seed: int,
+    kind: str = "topview",
+    progress: bool = True,
+) -> np.ndarray | list[np.ndarray]:
+    """Views of `sequence` at `frames` under `condition` (seeded offsets), from the cache or
+    rendered and cached: (F, size, size) float32 in [0, 1] for "topview", or a list of F
+    (M_i, 3) float32 viewpoint-frame point arrays for "points"."""
+    _check_kind(kind)
+    paths = prepare(source, sequence, config, frames=frames, conditions=[condition], seed=seed,
+                    kinds=[kind], progress=progress)
+    return _load(paths[condition, kind], kind)
