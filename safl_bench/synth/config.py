@@ -1,0 +1,112 @@
+"""Settings of the synthetic dataset: which sequences exist, how long they are, the sensor.
+
+Everything that changes the generated files lives in `SynthConfig` (recorded in each
+sequence's manifest), so a changed setting makes `ensure` regenerate the sequence.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from safl_bench.errors import ConfigError
+
+#: Bumped whenever the generator's output changes for the same seed and config.
+GENERATOR_VERSION = "1"
+
+DEFAULT_SEED = 0
+#: Test sequences, in the roles of KITTI 00 and 09.
+TEST_SEQUENCES: tuple[str, ...] = ("00", "09")
+#: Training sequences, in the roles of KITTI 01-08.
+TRAIN_SEQUENCES: tuple[str, ...] = ("01", "02", "03", "04")
+ALL_SEQUENCES: tuple[str, ...] = TEST_SEQUENCES + TRAIN_SEQUENCES
+
+
+@dataclass(frozen=True)
+class SequenceSpec:
+    """The shape of one sequence: its length and the size of its town."""
+
+    frames: int
+    #: number of street lines in each direction of the (warped) street grid
+    grid_lines: int
+    #: revisits the route must have: "both" (same and opposite direction), "any", "none"
+    revisits: str
+
+
+#: Default lengths: ~1400 frames (140 s) for the main test sequence, like a short KITTI 00.
+SEQUENCE_SPECS: dict[str, SequenceSpec] = {
+    "00": SequenceSpec(frames=1400, grid_lines=5, revisits="both"),
+    "09": SequenceSpec(frames=800, grid_lines=4, revisits="any"),
+    "01": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
+    "02": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
+    "03": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
+    "04": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
+}
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Every setting that changes the generated files (defaults: the benchmark's data set).
+
+    `frames` overrides the per-sequence length (tests use a handful of frames) and then drops
+    the revisit requirement (a short route cannot come back); `grid_lines` overrides the town
+    size.
+    """
+
+    frames: int | None = None
+    grid_lines: int | None = None
+    #: raster cell of the 2.5D world, metres
+    cell_m: float = 0.2
+    #: horizontal angular step of the spinning sensor (HDL-64E: 0.09-0.35 deg)
+    azimuth_res_deg: float = 0.35
+    #: number of laser beams (HDL-64E: 64)
+    beams: int = 64
+    elevation_top_deg: float = 2.0
+    elevation_bottom_deg: float = -24.8
+    max_range_m: float = 100.0
+    sensor_height_m: float = 1.73
+    range_noise_m: float = 0.02
+    dropout: float = 0.03
+    rate_hz: float = 10.0
+
+    def __post_init__(self) -> None:
+        if self.frames is not None and self.frames < 2:
+            raise ConfigError(f"frames must be at least 2, got {self.frames}")
+        if self.grid_lines is not None and self.grid_lines < 2:
+            raise ConfigError(f"grid_lines must be at least 2, got {self.grid_lines}")
+        if not 0.01 <= self.azimuth_res_deg <= 10:
+            raise ConfigError(f"azimuth_res_deg must be in [0.01, 10], got {self.azimuth_res_deg}")
+        if self.beams < 1 or self.max_range_m <= 5 or self.cell_m <= 0:
+            raise ConfigError("beams must be >= 1, max_range_m > 5 and cell_m > 0")
+
+    def spec(self, name: str) -> SequenceSpec:
+        """The spec of sequence `name` with this config's overrides applied."""
+        base = SEQUENCE_SPECS.get(name)
+        if base is None:
+            raise ConfigError(
+                f"unknown synthetic sequence {name!r}; known: {', '.join(ALL_SEQUENCES)}"
+            )
+        return dataclasses.replace(
+            base,
+            frames=self.frames if self.frames is not None else base.frames,
+            revisits=base.revisits if self.frames is None else "none",
+            grid_lines=self.grid_lines if self.grid_lines is not None else base.grid_lines,
+        )
+
+    def elevations_deg(self) -> np.ndarray:
+        """Beam elevations, top to bottom, HDL-64E-like: a denser upper block, a sparser lower one."""
+        if self.beams == 1:
+            return np.array([self.elevation_bottom_deg])
+        half = self.beams // 2
+        split_hi = self.elevation_top_deg + 0.39 * (self.elevation_bottom_deg - self.elevation_top_deg)
+        split_lo = split_hi - 0.5
+        upper = np.linspace(self.elevation_top_deg, split_hi, half)
+        lower = np.linspace(split_lo, self.elevation_bottom_deg, self.beams - half)
+        return np.concatenate([upper, lower])
+
+
+def sequence_seed(seed: int, name: str) -> np.random.SeedSequence:
+    """The seed sequence of one synthetic sequence: depends on the seed and the name only."""
+    return np.random.SeedSequence([int(seed) & 0xFFFFFFFF, *name.encode("utf-8")])

@@ -1,0 +1,199 @@
+"""Generate synthetic sequences on disk, and only those that are missing or stale.
+
+A sequence is current when its manifest (written last, atomically) matches the generator
+version, the seed and the config, and every file it lists exists with the recorded size (scans)
+or checksum (text files). Anything else, such as a run interrupted half-way, is regenerated.
+Sequences are independent (each seeded from the seed and its own name), so generating two at
+once in threads (the ray caster releases the GIL) gives the same bytes as one after another.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from safl_bench import paths
+from safl_bench.atomic import atomic_write_json
+from safl_bench.errors import DataError
+from safl_bench.fingerprint import to_jsonable
+from safl_bench.synth import writer
+from safl_bench.synth.config import (
+    ALL_SEQUENCES,
+    GENERATOR_VERSION,
+    SynthConfig,
+    sequence_seed,
+)
+from safl_bench.synth.lidar import Lidar
+from safl_bench.synth.routes import Trajectory, plan_trajectory, sensor_poses
+from safl_bench.synth.streets import StreetGrid, make_street_grid
+from safl_bench.synth.world import World, make_world
+
+#: threads used to generate several sequences at once (the machine this targets has 2 cores)
+WORKERS = 2
+
+
+def default_root(seed: int = 0) -> Path:
+    """Where the default synthetic dataset for `seed` lives."""
+    return paths.synth_root() / f"seed-{seed}"
+
+
+@dataclass
+class Scene:
+    """Everything needed to render one sequence: its streets, route, world and sensor."""
+
+    name: str
+    seed: int
+    config: SynthConfig
+    grid: StreetGrid
+    trajectory: Trajectory
+    poses: np.ndarray  # (n,4,4) world poses of the LiDAR
+    rngs: list[np.random.Generator]
+
+    def lidar_poses(self) -> np.ndarray:
+        """Poses relative to the first scan (the first one is the identity), as KITTI's."""
+        rel = np.linalg.inv(self.poses[0]) @ self.poses
+        rel[0] = np.eye(4)
+        return rel
+
+
+def make_route(name: str, seed: int = 0, config: SynthConfig | None = None) -> Scene:
+    """The streets and route of a sequence, without drawing the town (cheap)."""
+    config = config or SynthConfig()
+    spec = config.spec(name)
+    rngs = [np.random.default_rng(s) for s in sequence_seed(seed, name).spawn(4)]
+    grid = make_street_grid(spec.grid_lines, rngs[0])
+    traj = plan_trajectory(grid, spec.frames, rngs[2], revisits=spec.revisits,
+                           rate_hz=config.rate_hz)
+    return Scene(name, seed, config, grid, traj, sensor_poses(traj, config.sensor_height_m), rngs)
+
+
+def make_scene_world(scene: Scene) -> tuple[World, Lidar]:
+    """Draw the town and build the sensor of a scene."""
+    world = make_world(scene.grid, scene.rngs[1], scene.config.cell_m)
+    return world, Lidar(scene.config, scene.rngs[3])
+
+
+def _expected_manifest(name: str, seed: int, config: SynthConfig) -> dict[str, Any]:
+    return {
+        "generator_version": GENERATOR_VERSION,
+        "sequence": name,
+        "seed": int(seed),
+        "config": to_jsonable(config),
+    }
+
+
+def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None) -> bool:
+    """Whether sequence `name` under `root` is complete and made with these settings."""
+    config = config or SynthConfig()
+    path = writer.manifest_path(root, name)
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+    expected = _expected_manifest(name, seed, config)
+    if any(manifest.get(k) != v for k, v in expected.items()):
+        return False
+    sizes = manifest.get("scan_bytes", [])
+    if len(sizes) != manifest.get("frames"):
+        return False
+    velodyne = writer.sequence_dir(root, name) / "velodyne"
+    try:
+        on_disk = {p.name: p.stat().st_size for p in velodyne.glob("*.bin")}
+    except OSError:
+        return False
+    if on_disk != {f"{i:06d}.bin": size for i, size in enumerate(sizes)}:
+        return False
+    for rel, digest in manifest.get("text_sha256", {}).items():
+        file = root / rel
+        if not file.is_file() or writer.file_sha256(file) != digest:
+            return False
+    return True
+
+
+def generate_sequence(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None,
+                      on_frame: Callable[[], None] | None = None) -> None:
+    """Generate sequence `name` under `root` (overwriting whatever is there)."""
+    config = config or SynthConfig()
+    scene = make_route(name, seed, config)
+    manifest = writer.manifest_path(root, name)
+    manifest.unlink(missing_ok=True)  # from here on the sequence reads as incomplete
+    velodyne = writer.sequence_dir(root, name) / "velodyne"
+    velodyne.mkdir(parents=True, exist_ok=True)
+    n = len(scene.trajectory)
+    for stale in velodyne.glob("*.bin"):
+        if not stale.stem.isdigit() or int(stale.stem) >= n:
+            stale.unlink()
+    world, lidar = make_scene_world(scene)
+    sensor_rng = scene.rngs[3]
+    keys = sensor_rng.integers(0, 2**63 - 1, size=n, dtype=np.int64)
+    offsets = sensor_rng.uniform(0.0, np.radians(config.azimuth_res_deg), size=n)
+    sizes = []
+    for i in range(n):
+        points = lidar.scan(world, scene.poses[i], int(keys[i]), float(offsets[i]))
+        sizes.append(writer.write_scan(root, name, i, points))
+        if on_frame is not None:
+            on_frame()
+    digests = writer.write_text_files(root, name, scene.lidar_poses(), scene.trajectory.times)
+    atomic_write_json(manifest, {
+        **_expected_manifest(name, seed, config),
+        "frames": n,
+        "scan_bytes": sizes,
+        "text_sha256": digests,
+    })
+
+
+def ensure(root: Path, sequences: Sequence[str], seed: int = 0, progress: bool = True,
+           config: SynthConfig | None = None) -> None:
+    """Generate the sequences under `root` that are missing or stale; keep the others."""
+    config = config or SynthConfig()
+    root = Path(root)
+    if root.exists() and not root.is_dir():
+        raise DataError(f"synthetic data root {root} exists and is not a directory")
+    for name in sequences:
+        config.spec(name)  # unknown names fail before any work
+    todo = [n for n in dict.fromkeys(sequences) if not is_current(root, n, seed, config)]
+    if not todo:
+        return
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataError(f"cannot create synthetic data root {root}: {exc}") from exc
+    todo.sort(key=lambda n: -config.spec(n).frames)  # longest first balances the threads
+    total = sum(config.spec(n).frames for n in todo)
+    lock = threading.Lock()
+    stop = threading.Event()  # set on an interrupt so the worker threads end early
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, unit="scan", desc=f"synth {' '.join(todo)}")
+
+    def tick() -> None:
+        if stop.is_set():
+            raise KeyboardInterrupt
+        if bar is not None:
+            with lock:
+                bar.update(1)
+
+    try:
+        with ThreadPoolExecutor(max_workers=min(WORKERS, len(todo))) as pool:
+            futures = [pool.submit(generate_sequence, root, n, seed, config, tick) for n in todo]
+            try:
+                for f in futures:
+                    f.result()
+            except BaseException:
+                stop.set()
+                raise
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+__all__ = ["ALL_SEQUENCES", "default_root", "ensure", "generate_sequence", "is_current"]

@@ -1,0 +1,217 @@
+"""Routes through the street grid and the vehicle poses along them.
+
+A route is a random walk over street crossings (straight on, left or right; no U-turns) that is
+long enough for the sequence; on a small grid such walks come back to streets already driven,
+in the same and in the opposite direction, as KITTI 00, 05 and 08 do. Test sequences resample
+the walk until both kinds of revisit occur. The vehicle keeps to the right-hand lane, rounds
+corners on arcs, slows down for them, and varies its cruise speed a little.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from safl_bench.errors import ConfigError
+from safl_bench.synth.streets import StreetGrid
+from safl_bench.synth.world import LANE_OFFSET_M
+
+_DIRS = ((1, 0), (0, 1), (-1, 0), (0, -1))  # east, north, west, south in plan grid steps
+TURN_RADIUS_M = 9.0
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Sampled vehicle states: world xy (n,2), heading (n,), roll/pitch (n,), times (n,)."""
+
+    xy: np.ndarray
+    heading: np.ndarray
+    roll: np.ndarray
+    pitch: np.ndarray
+    times: np.ndarray
+    nodes: tuple[tuple[int, int], ...]  # the crossings visited, in order
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+
+def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator) -> list[tuple[int, int]]:
+    """A walk over an nu x nv grid of crossings with n_edges steps and no U-turns."""
+    node = (int(rng.integers(0, nu)), int(rng.integers(0, nv)))
+    walk = [node]
+    heading = -1
+    for _ in range(n_edges):
+        options, weights = [], []
+        turns = ((0, 0.5), (1, 0.25), (3, 0.25)) if heading >= 0 else tuple((t, 1.0) for t in range(4))
+        for turn, w in turns:
+            h = (max(heading, 0) + turn) % 4
+            nxt = (node[0] + _DIRS[h][0], node[1] + _DIRS[h][1])
+            if 0 <= nxt[0] < nu and 0 <= nxt[1] < nv:
+                options.append((h, nxt))
+                weights.append(w)
+        if not options:  # a dead end only at a 1-wide grid: turn around
+            h = (heading + 2) % 4
+            options, weights = [(h, (node[0] + _DIRS[h][0], node[1] + _DIRS[h][1]))], [1.0]
+        p = np.asarray(weights) / np.sum(weights)
+        heading, node = options[int(rng.choice(len(options), p=p))]
+        walk.append(node)
+    return walk
+
+
+def walk_revisits(walk: list[tuple[int, int]]) -> tuple[bool, bool]:
+    """Whether a walk drives some street again in the same / the opposite direction."""
+    edges = list(zip(walk[:-1], walk[1:], strict=True))
+    seen = set()
+    same = opposite = False
+    for a, b in edges:
+        same |= (a, b) in seen
+        opposite |= (b, a) in seen
+        seen.add((a, b))
+    return same, opposite
+
+
+def _centre_line(grid: StreetGrid, walk: list[tuple[int, int]],
+                 step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Dense plan-frame points along the walk, corners rounded by quadratic Bezier arcs.
+
+    Also returns, for each step of the walk, the index of the dense point where it ends.
+    """
+    pts = np.array([grid.node(i, j) for i, j in walk])
+    out = [pts[0][None, :]]
+    ends = []
+    for k in range(1, len(pts)):
+        a, b = pts[k - 1], pts[k]
+        d_in = (b - a) / np.linalg.norm(b - a)
+        start = a if k == 1 else out[-1][-1]
+        if k + 1 < len(pts):
+            d_out = (pts[k + 1] - b) / np.linalg.norm(pts[k + 1] - b)
+            turning = abs(float(d_in @ d_out)) < 0.5
+        else:
+            turning = False
+        end = b - d_in * TURN_RADIUS_M if turning else b
+        n = max(int(np.linalg.norm(end - start) / step), 1)
+        t = np.arange(1, n + 1)[:, None] / n
+        out.append(start + (end - start) * t)
+        ends.append(sum(len(o) for o in out) - 1)
+        if turning:
+            exit_pt = b + d_out * TURN_RADIUS_M
+            n = max(int(1.6 * TURN_RADIUS_M / step), 2)
+            t = np.arange(1, n + 1)[:, None] / n
+            out.append((1 - t) ** 2 * end + 2 * (1 - t) * t * b + t**2 * exit_pt)
+    return np.concatenate(out), np.asarray(ends)
+
+
+def _smooth_noise(n: int, rng: np.random.Generator, corr: float, scale: float) -> np.ndarray:
+    """A stationary AR(1) series with correlation `corr` between steps and std `scale`."""
+    e = rng.normal(0.0, scale * np.sqrt(1 - corr**2), size=n)
+    out = np.empty(n)
+    acc = rng.normal(0.0, scale)
+    for i in range(n):
+        acc = corr * acc + e[i]
+        out[i] = acc
+    return out
+
+
+def _drive(grid: StreetGrid, walk: list[tuple[int, int]], frames: int, cruise: float,
+           rate_hz: float, rng: np.random.Generator):  # type: ignore[no-untyped-def]
+    """Drive the walk: world path (x, y, arc length s, heading) and frame arc positions."""
+    centre, ends = _centre_line(grid, walk, step=0.25)
+    tangent = np.gradient(centre, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    lane = centre + LANE_OFFSET_M * np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
+    x, y = grid.warp.to_world(lane[:, 0], lane[:, 1])
+    xy = np.stack([x, y], axis=1)
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    heading = np.unwrap(np.arctan2(np.gradient(y), np.gradient(x)))
+    curvature = np.abs(np.gradient(heading) / np.maximum(np.gradient(s), 1e-6))
+
+    # speed: cruise with slow variation, capped by lateral acceleration in curves, then
+    # limited in acceleration (forward pass) and braking (backward pass)
+    ds = np.gradient(s)
+    v = cruise + _smooth_noise(len(s), rng, corr=0.999, scale=0.6)
+    curv = np.convolve(curvature, np.ones(9) / 9, mode="same")
+    v = np.minimum(v, np.sqrt(2.2 / np.maximum(curv, 1e-6)))
+    v = np.clip(v, 3.0, 13.0)
+    for i in range(1, len(v)):
+        v[i] = min(v[i], np.sqrt(v[i - 1] ** 2 + 2 * 1.2 * ds[i]))
+    for i in range(len(v) - 2, -1, -1):
+        v[i] = min(v[i], np.sqrt(v[i + 1] ** 2 + 2 * 2.5 * ds[i]))
+
+    dt = 1.0 / rate_hz
+    pos = np.empty(frames)
+    pos[0] = 0.0
+    for k in range(1, frames):
+        pos[k] = pos[k - 1] + float(np.interp(pos[k - 1], s, v)) * dt
+    return x, y, s, heading, pos, ends
+
+
+def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
+                    revisits: str = "none", rate_hz: float = 10.0) -> Trajectory:
+    """Poses of `frames` scans at `rate_hz` along a random route through `grid`.
+
+    `revisits` is "both" (drive some street again in the same and in the opposite direction),
+    "any" (one of the two) or "none".
+    """
+    if revisits not in ("both", "any", "none"):
+        raise ConfigError(f"revisits must be 'both', 'any' or 'none', got {revisits!r}")
+
+    def accept(w: list[tuple[int, int]]) -> bool:
+        same, opposite = walk_revisits(w)
+        return {"both": same and opposite, "any": same or opposite, "none": True}[revisits]
+
+    nu, nv = len(grid.u_lines), len(grid.v_lines)
+    if nu < 2 or nv < 2:
+        raise ConfigError("a street grid needs at least 2 streets each way")
+    cruise = rng.uniform(8.5, 11.0)
+    spacing = float(np.mean(np.diff(grid.u_lines)) + np.mean(np.diff(grid.v_lines))) / 2
+    needed = frames / rate_hz * (cruise + 1.5) + 2 * spacing  # upper bound on the distance
+    n_edges = int(np.ceil(needed / spacing)) + 1
+    for _ in range(2000):
+        walk = random_walk(nu, nv, n_edges, rng)
+        if not accept(walk):
+            continue
+        x, y, s, heading, pos, ends = _drive(grid, walk, frames, cruise, rate_hz, rng)
+        if pos[-1] > s[-1]:  # pragma: no cover - the walk length is an upper bound
+            continue
+        driven = walk[: int(np.searchsorted(s[ends], pos[-1])) + 1]
+        if accept(driven):
+            break
+    else:  # pragma: no cover - only on grids too small to revisit
+        raise ConfigError(f"no revisiting route of {frames} frames on a {nu}x{nv} street grid")
+    jitter = rng.uniform(-0.002, 0.002, size=frames)
+    jitter[0] = 0.0
+    times = np.arange(frames) / rate_hz + jitter
+    return Trajectory(
+        xy=np.stack([np.interp(pos, s, x), np.interp(pos, s, y)], axis=1),
+        heading=np.interp(pos, s, heading),
+        roll=np.radians(_smooth_noise(frames, rng, corr=0.97, scale=0.25)),
+        pitch=np.radians(_smooth_noise(frames, rng, corr=0.97, scale=0.3)),
+        times=times,
+        nodes=tuple(driven),
+    )
+
+
+def sensor_poses(traj: Trajectory, sensor_height: float) -> np.ndarray:
+    """World poses (n,4,4) of the LiDAR (x forward, y left, z up) along a trajectory."""
+    n = len(traj)
+    cy, sy = np.cos(traj.heading), np.sin(traj.heading)
+    cp, sp = np.cos(traj.pitch), np.sin(traj.pitch)
+    cr, sr = np.cos(traj.roll), np.sin(traj.roll)
+    poses = np.zeros((n, 4, 4))
+    # R = Rz(yaw) @ Ry(pitch) @ Rx(roll)
+    poses[:, 0, 0] = cy * cp
+    poses[:, 0, 1] = cy * sp * sr - sy * cr
+    poses[:, 0, 2] = cy * sp * cr + sy * sr
+    poses[:, 1, 0] = sy * cp
+    poses[:, 1, 1] = sy * sp * sr + cy * cr
+    poses[:, 1, 2] = sy * sp * cr - cy * sr
+    poses[:, 2, 0] = -sp
+    poses[:, 2, 1] = cp * sr
+    poses[:, 2, 2] = cp * cr
+    poses[:, 0, 3] = traj.xy[:, 0]
+    poses[:, 1, 3] = traj.xy[:, 1]
+    poses[:, 2, 3] = sensor_height
+    poses[:, 3, 3] = 1.0
+    return poses
