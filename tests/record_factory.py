@@ -6,8 +6,8 @@ import numpy as np
 
 from safl_bench.provenance import Environment
 from safl_bench.records import (
-    Metrics,
     MethodInfo,
+    Metrics,
     ResultRecord,
     TaskInfo,
     Timings,

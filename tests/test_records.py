@@ -1,0 +1,148 @@
+"""Result records: round trip, atomic writes, validation of corrupt files, loading a directory."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from record_factory import make_record
+
+from safl_bench.errors import DataError
+from safl_bench.provenance import collect_environment
+from safl_bench.records import (
+    MAX_CURVE_POINTS,
+    CorruptRecordError,
+    ResultRecord,
+    downsample_curve,
+    find_record,
+    load_existing,
+    load_record,
+    load_records,
+    record_path,
+    write_record,
+)
+
+
+def test_round_trip_through_file(tmp_path: Path) -> None:
+    record = make_record("stable_afl", condition="T5R1.5", seed=3)
+    path = write_record(tmp_path, record)
+    assert path == tmp_path / "stable_afl@1" / "SAFL__Synth00-T5R1.5-v0" / "seed-3.json"
+    assert load_record(path) == record
+    assert ResultRecord.from_json(json.loads(json.dumps(record.to_json()))) == record
+    assert find_record(tmp_path, "stable_afl", "1", record.task.id, 3) == path
+    assert find_record(tmp_path, "stable_afl", "1", record.task.id, 4) is None
+    assert load_existing(tmp_path, "stable_afl", "1", record.task.id, 3) == record
+
+
+def test_file_is_reproducible_and_small(tmp_path: Path) -> None:
+    record = make_record()
+    first = write_record(tmp_path / "a", record).read_bytes()
+    second = write_record(tmp_path / "b", record).read_bytes()
+    assert first == second
+    data = json.loads(first)
+    assert set(data["results"]) == {"sequence", "single_frame"}
+    assert set(data["results"]["sequence"]["curves"]) == {"pr", "roc"}
+    assert len(first) < 20_000
+
+
+def test_write_is_atomic_and_leaves_no_temp_files(tmp_path: Path) -> None:
+    path = write_record(tmp_path, make_record())
+    write_record(tmp_path, make_record(recall=0.25))  # overwrite in place
+    assert [p.name for p in path.parent.iterdir()] == ["seed-0.json"]
+    assert load_record(path).results["sequence"].metrics.recall_at_100_precision == 0.25
+    good = make_record()
+    seq = good.results["sequence"]
+    nan_metrics = dataclasses.replace(seq.metrics, auc=float("nan"))
+    bad = dataclasses.replace(
+        good, results={**good.results, "sequence": dataclasses.replace(seq, metrics=nan_metrics)}
+    )
+    with pytest.raises(CorruptRecordError, match="auc"):
+        write_record(tmp_path / "bad", bad)
+    assert not any((tmp_path / "bad").rglob("*.*")), "a refused record must leave no file behind"
+
+
+def test_curves_are_downsampled() -> None:
+    x = np.linspace(0, 1, 5000)
+    xs, ys = downsample_curve(x, x**2)
+    assert len(xs) == len(ys) <= MAX_CURVE_POINTS
+    assert xs[0] == 0.0 and xs[-1] == 1.0 and ys[-1] == 1.0
+    assert downsample_curve([0.0, 1.0], [1.0, 0.0]) == ([0.0, 1.0], [1.0, 0.0])
+
+
+def _corrupt(tmp_path: Path, edit) -> Path:
+    path = write_record(tmp_path, make_record())
+    data = json.loads(path.read_text())
+    text = edit(data)
+    path.write_text(text if isinstance(text, str) else json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("edit", "reason"),
+    [
+        (lambda d: json.dumps(d)[:300], "not valid JSON"),
+        (
+            lambda d: d["results"]["sequence"]["metrics"].pop("auc"),
+            r"results\.sequence\.metrics\.auc: missing",
+        ),
+        (lambda d: d.pop("timings"), "timings: missing"),
+        (lambda d: d["task"].update(version="0"), r"task\.version: expected an integer"),
+        (lambda d: d["task"].update(protocol="other"), r"task\.protocol: must be one of"),
+        (lambda d: d["results"]["sequence"]["metrics"].update(f1_max=1.5), "fraction"),
+        (lambda d: d["results"].update(bogus={}), "unknown matching mode"),
+        (lambda d: d.update(schema=99), "schema"),
+        (lambda d: d["results"]["sequence"]["curves"]["pr"]["recall"].pop(), "differ in length"),
+        (lambda d: json.dumps(d).replace('"matcher_s": 1.5', '"matcher_s": NaN'), "not valid JSON"),
+        (lambda d: d.update(created="yesterday"), "ISO 8601"),
+    ],
+)
+def test_corrupt_record_is_reported_by_file(tmp_path: Path, edit, reason: str) -> None:
+    path = _corrupt(tmp_path, edit)
+    with pytest.raises(CorruptRecordError, match=reason) as info:
+        load_record(path)
+    assert str(path) in str(info.value)
+    assert isinstance(info.value, DataError)
+    assert info.value.path == path
+
+
+def test_load_records_skips_and_reports_corrupt_files(tmp_path: Path) -> None:
+    good = [make_record("a", seed=s) for s in (0, 1)] + [make_record("b")]
+    for record in good:
+        write_record(tmp_path, record)
+    broken = record_path(tmp_path, "a", "1", good[0].task.id, 0)
+    broken.write_text(broken.read_text()[:-40])  # truncated
+    (broken.parent / ".seed-0.abc.tmp.json").write_text("{")  # interrupted write: ignored
+    records, problems = load_records(tmp_path)
+    assert {(r.method.name, r.seed) for r in records} == {("a", 1), ("b", 0)}
+    assert [p.path for p in problems] == [broken]
+    assert "not valid JSON" in problems[0].reason
+    assert load_records(tmp_path / "missing") == ([], [])
+
+
+def test_load_existing_rejects_a_record_of_another_run(tmp_path: Path) -> None:
+    record = make_record("a", seed=0)
+    path = write_record(tmp_path, record)
+    other = record_path(tmp_path, "a", "1", record.task.id, 1)
+    other.write_bytes(path.read_bytes())  # copied to the wrong seed
+    with pytest.raises(CorruptRecordError, match=r"seed-1\.json"):
+        load_existing(tmp_path, "a", "1", record.task.id, 1)
+
+
+def test_task_ids_map_to_safe_paths(tmp_path: Path) -> None:
+    path = record_path(tmp_path, "my method", "0.2", "SAFL/KITTI00-T1R1-v0", 0)
+    assert path.relative_to(tmp_path).parts == (
+        "my_method@0.2",
+        "SAFL__KITTI00-T1R1-v0",
+        "seed-0.json",
+    )
+
+
+def test_environment_is_collected() -> None:
+    env = collect_environment()
+    assert env.python.count(".") == 2
+    assert env.cpu_cores >= 1 and env.cpu_model
+    assert env.libraries["numpy"] == np.__version__
+    assert env.git_revision
