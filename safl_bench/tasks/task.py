@@ -197,6 +197,7 @@ class Task:
                 raise DataError(f"task {self.spec.id} was built from arrays without {kind} views")
             from safl_bench import mapcache
 
+            self.prepare([kind])  # database and queries in one pass over the scans
             condition = CLEAN if role == "database" else self.spec.condition
             frames = self.database_frames if role == "database" else self.query_frames
             self._views[role, kind] = mapcache.load_views(

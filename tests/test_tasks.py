@@ -1,0 +1,277 @@
+"""Tasks: registry rules, built-in suites, noise distribution, determinism, T0R0, missing data."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+from scipy import stats
+
+import safl_bench  # noqa: F401  (registers the built-in tasks)
+from safl_bench import tasks
+from safl_bench.cli import main as cli_main
+from safl_bench.errors import ConfigError, DataError, RegistryError
+from safl_bench.mapbuild import build_views
+from safl_bench.mapconfig import MapConfig
+from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition, sample_offsets
+from safl_bench.tasks import TaskSpec
+
+PINNED = Path(tasks.__file__).parent / "fingerprints.json"
+TINY_MAP = MapConfig(size=32)
+
+
+@pytest.fixture
+def temp_register() -> Iterator[Callable[..., TaskSpec]]:
+    """Register tasks for one test; they are removed afterwards."""
+    added: list[str] = []
+
+    def add(task_id: str, **fields: object) -> TaskSpec:
+        spec = tasks.register(task_id, **fields)
+        added.append(spec.id)
+        return spec
+
+    yield add
+    for task_id in added:
+        tasks.unregister(task_id)
+
+
+# ---------------------------------------------------------------- registry
+
+
+def test_builtin_suites_cover_the_paper_and_revisit() -> None:
+    paper = tasks.suite("paper", source="synth")
+    assert paper == [f"SAFL/Synth00-{c.name}-v0" for c in PAPER_CONDITIONS]
+    full_kitti = tasks.suite("paper-full", source="kitti")
+    for seq in ("00", "09"):
+        assert [f"SAFL/KITTI{seq}-{c.name}-v0" for c in PAPER_CONDITIONS] == [
+            i for i in full_kitti if i.startswith(f"SAFL/KITTI{seq}")
+        ]
+    assert set(tasks.suite("revisit")) == {
+        "SAFL/Synth00-Revisit-v0",
+        "SAFL/Synth09-Revisit-v0",
+        "SAFL/KITTI00-Revisit-v0",
+        "SAFL/KITTI05-Revisit-v0",
+        "SAFL/KITTI08-Revisit-v0",
+    }
+    assert set(tasks.suite("all")) >= set(full_kitti) | set(tasks.suite("revisit"))
+    spec = tasks.spec("SAFL/KITTI08-Revisit-v0")
+    assert (spec.tp_radius_m, spec.fp_radius_m, spec.window_s, spec.condition) == (
+        3.0,
+        20.0,
+        30.0,
+        CLEAN,
+    )
+    spec = tasks.spec("SAFL/Synth09-T20R2-v0")
+    assert (spec.condition, spec.step, spec.tp_radius_m, spec.window_s) == (
+        Condition(20, 2),
+        4,
+        10.0,
+        None,
+    )
+    with pytest.raises(RegistryError, match="Did you mean: paper"):
+        tasks.suite("papr")
+
+
+def test_builtin_tasks_are_registered_with_gymnasium_lazily() -> None:
+    for task_id in tasks.suite("all"):
+        env_spec = gymnasium.spec(task_id)
+        assert env_spec.entry_point == "safl_bench.tasks.env:TaskEnv"
+        assert env_spec.kwargs == {"task_id": task_id}
+
+
+def test_builtin_definitions_match_their_pinned_fingerprints() -> None:
+    """A changed definition must get a new version: v0's fingerprint never changes."""
+    pinned = json.loads(PINNED.read_text())
+    current = {i: tasks.spec(i).fingerprint for i in tasks.suite("all")}
+    changed = sorted(i for i in pinned if i in current and current[i] != pinned[i])
+    assert not changed, f"definitions changed without a new version: {changed}"
+    assert set(pinned) == set(current)
+
+
+def test_unknown_ids_suggest_close_ones() -> None:
+    with pytest.raises(RegistryError, match=r"Did you mean: SAFL/KITTI00-T5R1\.5-v0"):
+        tasks.spec("SAFL/KITI00-T5R1.5-v0")
+    with pytest.raises(RegistryError, match="unknown task"):
+        tasks.make("nothing like it")
+    with pytest.raises(RegistryError, match="no version v3; registered versions: v0"):
+        tasks.spec("SAFL/Synth00-T1R1-v3")
+
+
+def test_duplicates_versions_and_fingerprints(temp_register: Callable[..., TaskSpec]) -> None:
+    v0 = temp_register("Test/Thing-T1R1-v0", source="synth", sequence="00", condition="T1R1")
+    with pytest.raises(RegistryError, match="already registered"):
+        tasks.register("Test/Thing-T1R1-v0", source="synth", sequence="00")
+    v1 = temp_register(
+        "Test/Thing-T1R1-v1", source="synth", sequence="00", condition="T1R1", step=2
+    )
+    assert v1.fingerprint != v0.fingerprint
+    assert replace(v0, id="Test/Other-v4").fingerprint == v0.fingerprint  # name-independent
+    with pytest.warns(UserWarning, match="latest version Test/Thing-T1R1-v1"):
+        assert tasks.spec("Test/Thing-T1R1") is v1
+    with pytest.warns(UserWarning, match="superseded by Test/Thing-T1R1-v1"):
+        assert tasks.spec("Test/Thing-T1R1-v0") is v0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert tasks.spec("Test/Thing-T1R1-v1") is v1
+    assert "Test/Thing-T1R1-v1" in gymnasium.registry
+
+
+def test_spec_validation() -> None:
+    with pytest.raises(ConfigError, match="version"):
+        TaskSpec(id="Test/NoVersion", source="synth", sequence="00")
+    with pytest.raises(ConfigError, match="source"):
+        TaskSpec(id="Test/A-v0", source="lidar", sequence="00")
+    with pytest.raises(ConfigError, match="T0R0"):
+        TaskSpec(
+            id="Test/A-v0",
+            source="synth",
+            sequence="00",
+            protocol="revisit",
+            window_s=30.0,
+            condition=Condition(1, 1),
+            tp_radius_m=3,
+            fp_radius_m=20,
+        )
+    with pytest.raises(ConfigError, match="time window"):
+        TaskSpec(id="Test/A-v0", source="synth", sequence="00", window_s=30.0)
+    with pytest.raises(ConfigError, match="step"):
+        TaskSpec(id="Test/A-v0", source="synth", sequence="00", step=0)
+
+
+def test_list_tasks_cli_shows_paper_and_revisit_tasks(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli_main(["list", "tasks"]) == 0
+    out = capsys.readouterr().out
+    for seq, source in (
+        ("Synth00", "synthetic default"),
+        ("KITTI00", "KITTI"),
+        ("KITTI09", "KITTI"),
+    ):
+        for c in PAPER_CONDITIONS:
+            line = next(x for x in out.splitlines() if x.startswith(f"SAFL/{seq}-{c.name}-v0 "))
+            assert line.split()[1:4] == ["paper", seq[-2:], c.name] and line.endswith(source)
+    assert "SAFL/KITTI08-Revisit-v0" in out and "SAFL/Synth00-Revisit-v0" in out
+    assert (
+        cli_main(["list", "tasks", "--suite", "paper", "--source", "kitti", "--fingerprints"]) == 0
+    )
+    lines = capsys.readouterr().out.splitlines()
+    assert sum(line.startswith("SAFL/KITTI00-") for line in lines) == 12
+    assert tasks.spec("SAFL/KITTI00-T1R1-v0").fingerprint in lines[2]
+
+
+# ---------------------------------------------------------------- noise
+
+
+@pytest.mark.parametrize("condition", [Condition(5.0, 1.5), Condition(20.0, 2.0)])
+def test_viewpoint_noise_has_the_declared_distribution(condition: Condition) -> None:
+    """Translation uniform over the disc of radius a (so r^2/a^2 ~ U(0,1), angle ~ U(0, 2 pi));
+    heading uniform in (-b/2, b/2)."""
+    off = sample_offsets(4000, condition, seed=7)
+    a, b = condition.translation_m, condition.heading_rad
+    r2 = (off[:, 0] ** 2 + off[:, 1] ** 2) / a**2
+    angle = np.mod(np.arctan2(off[:, 1], off[:, 0]), 2 * np.pi) / (2 * np.pi)
+    heading = off[:, 2] / b + 0.5
+    for sample in (r2, angle, heading):
+        assert stats.kstest(sample, "uniform").pvalue > 0.01
+    assert np.abs(off[:, 2]).max() < b / 2 and r2.max() <= 1.0
+    # a disc radius, not a square: a uniform square would give r^2/a^2 up to 2
+    assert stats.kstest(np.sqrt(r2), "uniform").pvalue < 1e-6
+
+
+# ---------------------------------------------------------------- materialised tasks
+
+
+@pytest.fixture
+def tiny_tasks(
+    kitti_root: Path, safl_home: Path, temp_register: Callable[..., TaskSpec]
+) -> Callable[..., tasks.TaskSpec]:
+    """Register a paper task on the tiny KITTI-layout fixture (12 scans, every frame)."""
+
+    def add(condition: str = "T1R1", seed: int = 0, version: int = 0) -> TaskSpec:
+        return temp_register(
+            f"Test/Tiny-{condition}-s{seed}-v{version}",
+            source="kitti",
+            sequence="00",
+            condition=condition,
+            step=1,
+            seed=seed,
+            map_config=TINY_MAP,
+        )
+
+    return add
+
+
+def test_task_materialises_frames_positions_and_truth(
+    kitti_root: Path, tiny_tasks: Callable[..., TaskSpec]
+) -> None:
+    spec = tiny_tasks("T1R1")
+    task = tasks.make(spec.id, kitti_root=str(kitti_root), progress=False)
+    assert len(task) == 12 and task.database_frames.tolist() == list(range(12))
+    np.testing.assert_allclose(np.diff(task.database_times), 0.1, atol=1e-9)
+    steps = np.hypot(*np.diff(task.database_positions, axis=0).T)
+    np.testing.assert_allclose(steps, 1.0, atol=1e-6)  # the fixture drives 1 m per scan
+    assert task.truth.labels(np.arange(12)).tolist() == [1] * 12
+    assert task.truth.label_of(0, 9) == 1 and task.truth.distances(0, 9) <= 9.0
+    assert task.truth.label_of(0, 11) == -1 and task.truth.distances(0, 11) > 10.0  # 11 m of road
+    np.testing.assert_array_equal(task.query_offsets, sample_offsets(12, Condition(1, 1), 0))
+    db, q = task.database("topview"), task.queries("topview")
+    assert db.shape == q.shape == (12, 32, 32) and db.dtype == np.float32
+    assert 0.0 <= db.min() and db.max() <= 1.0 and db.max() > 0
+    assert not np.array_equal(db, q)  # the queries are re-rendered with noise
+    points = task.database("points")
+    assert len(points) == 12 and points[0].shape[1] == 3
+    info = task.info()
+    assert info["fingerprint"] == spec.fingerprint and info["data_label"] == "KITTI"
+    with pytest.raises(ConfigError, match="view kind"):
+        task.database("image")
+
+
+def test_t0r0_queries_equal_the_database(
+    kitti_root: Path, tiny_tasks: Callable[..., TaskSpec]
+) -> None:
+    task = tasks.make(tiny_tasks("T0R0").id, kitti_root=str(kitti_root), progress=False)
+    db = task.database("topview")
+    np.testing.assert_array_equal(task.queries("topview"), db)
+    # and the noisy rendering path with zero offsets gives the clean maps too
+    seq = task.source.sequence("00")
+    zero = np.zeros((len(task.query_frames), 3))
+    views = build_views(
+        seq, TINY_MAP, task.query_frames, {"zero": zero}, ["topview"], progress=False
+    )
+    np.testing.assert_array_equal(views["zero", "topview"], db)
+
+
+def test_same_seed_same_queries_other_seed_other_queries(
+    kitti_root: Path,
+    tiny_tasks: Callable[..., TaskSpec],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+) -> None:
+    first = tasks.make(tiny_tasks("T5R1", seed=3).id, kitti_root=str(kitti_root), progress=False)
+    q1 = first.queries("topview")
+    monkeypatch.setenv("SAFL_HOME", str(tmp_path / "fresh"))  # render again, not from the cache
+    again = tasks.make(
+        tiny_tasks("T5R1", seed=3, version=1).id, kitti_root=str(kitti_root), progress=False
+    )
+    np.testing.assert_array_equal(again.queries("topview"), q1)
+    other = tasks.make(tiny_tasks("T5R1", seed=4).id, kitti_root=str(kitti_root), progress=False)
+    assert not np.array_equal(other.queries("topview"), q1)
+    np.testing.assert_array_equal(other.database("topview"), first.database("topview"))
+
+
+def test_kitti_tasks_say_what_is_missing(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, kitti_root: Path
+) -> None:
+    monkeypatch.delenv("SAFL_KITTI_ROOT", raising=False)
+    with pytest.raises(DataError, match="SAFL/KITTI00-T1R1-v0.*--kitti-root.*SAFL_KITTI_ROOT"):
+        tasks.make("SAFL/KITTI00-T1R1-v0")
+    with pytest.raises(DataError, match="does not exist"):
+        tasks.make("SAFL/KITTI00-T1R1-v0", kitti_root=str(tmp_path / "nowhere"))
+    monkeypatch.setenv("SAFL_KITTI_ROOT", str(kitti_root))
+    with pytest.raises(DataError, match=r"SAFL/KITTI09-T1R1-v0.*09.*sequences under .*: 00"):
+        tasks.make("SAFL/KITTI09-T1R1-v0")
