@@ -268,7 +268,7 @@ def test_kitti_tasks_say_what_is_missing(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, kitti_root: Path
 ) -> None:
     monkeypatch.delenv("SAFL_KITTI_ROOT", raising=False)
-    with pytest.raises(DataError, match="SAFL/KITTI00-T1R1-v0.*--kitti-root.*SAFL_KITTI_ROOT"):
+    with pytest.raises(DataError, match=r"SAFL/KITTI00-T1R1-v0.*--kitti-root.*SAFL_KITTI_ROOT"):
         tasks.make("SAFL/KITTI00-T1R1-v0")
     with pytest.raises(DataError, match="does not exist"):
         tasks.make("SAFL/KITTI00-T1R1-v0", kitti_root=str(tmp_path / "nowhere"))
