@@ -3,8 +3,8 @@
 A `DataSource` opens sequences and gives each a cheap fingerprint for cache keys: no file is
 hashed in full (KITTI is 80 GB). For KITTI it covers the root path, the sizes and modification
 times of poses/calib/times and the number of scans; for the synthetic default it covers the seed
-and the generator's manifest (any JSON files at the dataset root, hashed), plus the same file
-statistics when the root holds no manifest.
+and the generator's manifest of the sequence (hashed), or the same file statistics as for KITTI
+when there is no manifest.
 """
 
 from __future__ import annotations
@@ -61,22 +61,22 @@ class DataSource:
             "scans": sum(1 for _ in velo.glob("*.bin")) if velo.is_dir() else 0,
         }
 
-    def manifest_digest(self) -> str | None:
-        """SHA-256 over the JSON files at the root (the generator's manifest), if any."""
-        files = sorted(self.root.glob("*.json"))
-        if not files:
-            return None
-        h = hashlib.sha256()
-        for path in files:
-            h.update(path.name.encode())
-            h.update(path.read_bytes())
-        return h.hexdigest()
+    def manifest_digest(self, name: str) -> str | None:
+        """SHA-256 of the synthetic generator's manifest of sequence `name`, if there is one.
+
+        The manifest records the generator version, seed, settings, scan sizes and text-file
+        digests, so it changes whenever the generated data does.
+        """
+        from safl_bench.synth.writer import manifest_path  # lazy: only synthetic sources
+
+        path = manifest_path(self.root, name)
+        return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else None
 
     def fingerprint(self, name: str) -> str:
         """Cheap fingerprint of sequence `name` of this source (for map-cache keys)."""
         name = str(name)
         if self.kind == "synth":
-            manifest = self.manifest_digest()
+            manifest = self.manifest_digest(name)
             stats = None if manifest else self.file_stats(name)
             return fingerprint("synth", self.seed, name, manifest, stats)
         return fingerprint("kitti", str(self.root.resolve()), name, self.file_stats(name))

@@ -15,7 +15,8 @@ Two backends share one interface (`LocalMap`):
 - `OctoMapLocalMap` ("octomap"): the real OctoMap (octomap-python) with full ray casting, hits and
   misses. Each scan is downsampled to the voxel grid (one point per voxel centre, as OctoMap
   users do) and inserted with its sensor origin. An occupied voxel is deleted when no scan of the
-  window hit it any more; all nodes farther than r from the robot are deleted every K scans.
+  window hit it any more; all nodes farther than r from the robot are deleted every 10 scans
+  (occupied ones are filtered by distance on every read).
   Free-space evidence (misses) of scans older than the window is not undone (OctoMap cannot),
   so this backend's map depends weakly on history before the window; clamping bounds that.
 
@@ -39,6 +40,7 @@ _OFF = 1 << 20  # voxel index offset: 21 bits per axis, +-2^20 voxels
 _MASK = (1 << 21) - 1
 _EMPTY = np.int64(-1)
 OCTOMAP_TREE_DEPTH = 16
+SWEEP_EVERY = 10  # the OctoMap backend deletes far nodes every this many scans
 
 
 @numba.njit(cache=True)
@@ -276,7 +278,7 @@ class OctoMapLocalMap(LocalMap):
         self.tree.insertPointCloud(centres, self.origin.copy(), maxrange=-1.0)
         for centre in keys_to_centres(stale, self.config.voxel_m):
             self.tree.deleteNode(centre, OCTOMAP_TREE_DEPTH)
-        if (self.count + 1) % self.config.window == 0:
+        if (self.count + 1) % SWEEP_EVERY == 0:
             self._drop_far()
 
     def _drop_far(self) -> None:

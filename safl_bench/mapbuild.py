@@ -99,11 +99,9 @@ def build_views(
         base = pose_viewpoint(poses[i])
         xy, value = encode(centres, robot_z, config)
         for pos in at[int(i)]:
+            moves = [offsets[lb] for lb in labels]
             vps = np.stack(
-                [
-                    noisy_viewpoints(base, None if offsets[lb] is None else offsets[lb][pos])[0]
-                    for lb in labels
-                ]
+                [noisy_viewpoints(base, None if m is None else m[pos])[0] for m in moves]
             )
             if "topview" in kinds:
                 images = render(xy, value, vps, config)

@@ -110,3 +110,31 @@ def test_cli_prepare_kitti(kitti_root: Path, safl_home: Path, capsys: pytest.Cap
     assert [f.stat().st_mtime_ns for f in files] == stamps
     assert main([*argv[:-3], "T1X", "--quiet"]) == 2
     assert "not a noise condition" in capsys.readouterr().err
+
+
+def test_synth_source_calls_ensure_and_keys_on_manifest(
+    tmp_path: Path, safl_home: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from conftest import write_kitti
+
+    from safl_bench import synth
+    from safl_bench.datasource import resolve_source
+    from safl_bench.synth.writer import manifest_path
+
+    calls = []
+
+    def fake_ensure(root: Path, sequences: list[str], seed: int = 0, progress: bool = True) -> None:
+        calls.append((root, list(sequences), seed))
+        for name in sequences:
+            write_kitti(root, name, n=4)
+            manifest_path(root, name).write_text(f'{{"seed": {seed}}}')
+
+    monkeypatch.setattr(synth, "ensure", fake_ensure)
+    monkeypatch.setattr(synth, "default_root", lambda seed=0: tmp_path / f"seed-{seed}")
+    source = resolve_source(None, sequences=["09"], seed=3, progress=False)
+    assert calls == [(tmp_path / "seed-3", ["09"], 3)]
+    assert source.kind == "synth" and source.label == "synthetic default (seed 3)"
+    assert len(source.sequence("09")) == 4
+    before = source.fingerprint("09")
+    manifest_path(source.root, "09").write_text('{"seed": 4}')
+    assert source.fingerprint("09") != before
