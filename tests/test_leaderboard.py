@@ -1,0 +1,277 @@
+"""Leaderboard tables and figures from hand-made records: exact cells, missing cells, seeds,
+task versions and data sources kept apart, and byte-identical regeneration."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from record_factory import SYNTH_LABEL, make_record
+
+from safl_bench.cli import main as cli_main
+from safl_bench.errors import DataError
+from safl_bench.leaderboard import build_leaderboard
+from safl_bench.leaderboard.grouping import Cell, aggregate, condition_order, group_records
+from safl_bench.leaderboard.tables import auc_table, recall_table, revisit_table, time_table
+from safl_bench.leaderboard.training_logs import read_training_log
+from safl_bench.records import ResultRecord, write_record
+
+
+def _paper_records() -> list[ResultRecord]:
+    """Two methods on T1R1 and T5R1; 'sad' lacks T5R1."""
+    return [
+        make_record("stable_afl", condition="T1R1", recall=0.909, auc=0.95, ms=16.1),
+        make_record("stable_afl", condition="T5R1", recall=0.584, auc=0.90, ms=15.8),
+        make_record("sad", condition="T1R1", recall=0.283, auc=0.80, ms=3.2, single_recall=0.3),
+    ]
+
+
+def _table(records: list[ResultRecord], build=recall_table):
+    groups, notes = group_records(records)
+    assert len(groups) == 1
+    ((key, group),) = groups.items()
+    return build(key, group, notes[key])
+
+
+def _rows(markdown: str) -> list[str]:
+    return [line for line in markdown.splitlines() if line.startswith("| ")]
+
+
+def test_recall_table_has_exact_cells_and_dashes_for_missing() -> None:
+    md = _table(_paper_records()).markdown()
+    assert md.startswith(
+        f"## Recall at 100 % precision (%) — {SYNTH_LABEL}, sequence 00, paper protocol, "
+        "task version v0\n"
+    )
+    assert _rows(md) == [
+        "| Method | Version | Matching | T1R1 | T5R1 |",
+        "| sad | 1 | sequence | 28.3 | — |",
+        "| sad | 1 | single-frame | 30.0 | — |",
+        "| stable_afl | 1 | sequence | **90.9** | 58.4 |",
+        "| stable_afl | 1 | single-frame | **45.5** | 29.2 |",
+    ]
+    assert "nan" not in md.lower()
+
+
+def test_csv_has_numbers_source_and_empty_missing_cells() -> None:
+    csv = _table(_paper_records()).csv().splitlines()
+    assert csv[0] == "Source,Protocol,Sequence,Task version,Method,Version,Matching,T1R1,T5R1,Seeds"
+    assert csv[1] == f"{SYNTH_LABEL},paper,00,0,sad,1,sequence,28.3,,0"
+    assert csv[4] == f"{SYNTH_LABEL},paper,00,0,stable_afl,1,single-frame,45.5,29.2,0"
+
+
+def test_auc_and_time_tables() -> None:
+    records = _paper_records()
+    auc = _rows(_table(records, auc_table).markdown())
+    assert auc[1] == "| sad | 1 | sequence | 0.800 | — |"
+    assert auc[4] == "| stable_afl | 1 | single-frame | **0.855** | 0.810 |"
+    timing = _table(records, time_table)
+    rows = _rows(timing.markdown())
+    assert rows == [
+        "| Method | Version | T1R1 | T5R1 |",
+        "| sad | 1 | 3.20 | — |",
+        "| stable_afl | 1 | 16.10 | 15.80 |",
+    ]
+    assert any("Test CPU (2 cores)" in note for note in timing.notes)
+
+
+def test_seeds_are_averaged_only_over_complete_cells() -> None:
+    records = [
+        make_record("a", condition="T1R1", seed=0, recall=0.5),
+        make_record("a", condition="T1R1", seed=1, recall=0.7),
+        make_record("a", condition="T5R1", seed=0, recall=0.4),  # seed 1 missing
+    ]
+    table = _table(records)
+    rows = _rows(table.markdown())
+    assert rows[1] == "| a | 1 | sequence | 60.0 ± 14.1 | — |"
+    assert any("T5R1 lack seed(s) 1" in note for note in table.notes)
+    assert "Mean ± sample standard deviation over seeds 0, 1" in table.markdown()
+    header = table.csv().splitlines()[0].split(",")
+    assert "T1R1 std" in header
+
+
+def test_aggregate_rules() -> None:
+    assert aggregate({0: 0.5}, frozenset({0, 1})) is None
+    assert aggregate({0: 0.5, 1: None}, frozenset({0, 1})) == Cell(None, None, 2)
+    assert aggregate({0: 0.5}, frozenset({0})) == Cell(0.5, None, 1)
+
+
+def test_task_versions_and_sources_are_never_mixed() -> None:
+    records = [
+        make_record("a", condition="T1R1", task_version=0, recall=0.5),
+        make_record("a", condition="T1R1", task_version=1, recall=0.9),
+        make_record("a", condition="T1R1", source_kind="kitti", source_label="KITTI", recall=0.2),
+    ]
+    groups, _ = group_records(records)
+    assert [(k.source_label, k.task_version) for k in groups] == [
+        ("KITTI", 0),
+        (SYNTH_LABEL, 0),
+        (SYNTH_LABEL, 1),
+    ]
+    texts = {k: recall_table(k, g).markdown() for k, g in groups.items()}
+    for key, md in texts.items():
+        assert key.source_label in md.splitlines()[0]
+        assert f"task version v{key.task_version}" in md.splitlines()[0]
+        assert len(_rows(md)) == 3  # header + one method in two modes: nothing from other groups
+    v1 = next(md for k, md in texts.items() if k.task_version == 1)
+    assert "| a | 1 | sequence | 90.0 |" in v1 and "50.0" not in v1
+
+
+def test_records_of_an_older_task_spec_are_left_out_with_a_note() -> None:
+    records = [
+        make_record("a", condition="T1R1", spec_fingerprint="old", created="2025-01-01T00:00:00Z"),
+        make_record("b", condition="T1R1", spec_fingerprint="new", created="2025-02-01T00:00:00Z"),
+    ]
+    table = _table(records)
+    assert [r[0] for r in table.rows] == ["b", "b"]
+    assert any("older spec" in note and "a v1 seed 0" in note for note in table.notes)
+
+
+def test_revisit_table() -> None:
+    records = [
+        make_record("a", protocol="revisit", sequence="00", recall=0.5, auc=0.9, f1=0.8),
+        make_record("a", protocol="revisit", sequence="09", recall=0.4, auc=0.8, f1=0.6),
+        make_record("b", protocol="revisit", sequence="00", recall=0.3, auc=0.7, f1=0.5),
+    ]
+    md = _table(records, revisit_table).markdown()
+    assert "revisit protocol, task version v0" in md.splitlines()[0]
+    rows = _rows(md)
+    assert rows[0] == (
+        "| Method | Version | Matching | 00 F1max | 00 R@100P (%) | 00 AUC "
+        "| 09 F1max | 09 R@100P (%) | 09 AUC |"
+    )
+    assert (
+        rows[1] == "| a | 1 | sequence | **0.800** | **50.0** | **0.900** | 0.600 | 40.0 | 0.800 |"
+    )
+    assert rows[3] == "| b | 1 | sequence | 0.500 | 30.0 | 0.700 | — | — | — |"
+
+
+def test_condition_order_follows_the_paper() -> None:
+    assert condition_order(["T20R2", "T1R1.5", "T5R1", "T1R1", "T0R0"]) == [
+        "T1R1",
+        "T5R1",
+        "T1R1.5",
+        "T20R2",
+        "T0R0",
+    ]
+
+
+def _write_all(results: Path, records: list[ResultRecord]) -> None:
+    for record in records:
+        write_record(results, record)
+
+
+SRC = "synthetic-default-seed-0"
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
+    }
+
+
+def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> None:
+    records = [*_paper_records(), make_record("stable_afl", protocol="revisit", sequence="00")]
+    out1, out2 = tmp_path / "lb1", tmp_path / "lb2"
+    build_leaderboard(records, out1, figures=False)
+    report = build_leaderboard(list(reversed(records)), out2, figures=False)
+    files = _files(out1)
+    assert files == _files(out2)
+    assert set(files) == {
+        "index.md",
+        "tables/all-results.csv",
+        *(
+            f"tables/{SRC}/paper-00-v0-{t}.{ext}"
+            for t in ("recall", "auc", "time")
+            for ext in ("md", "csv")
+        ),
+        f"tables/{SRC}/revisit-v0.md",
+        f"tables/{SRC}/revisit-v0.csv",
+    }
+    assert report.headline is not None and report.headline.key.sequence == "00"
+    index = files["index.md"].decode()
+    assert "## Headline" in index and "| stable_afl | 1 | sequence | **90.9** | 58.4 |" in index
+    # Regenerating without the revisit record removes its table and keeps hand-written files.
+    (out1 / "README.md").write_text("hand-written\n")
+    report = build_leaderboard(records[:3], out1, figures=False)
+    assert not (out1 / f"tables/{SRC}/revisit-v0.md").exists()
+    assert [p.name for p in report.removed] == ["revisit-v0.csv", "revisit-v0.md"]
+    assert (out1 / "README.md").read_text() == "hand-written\n"
+
+
+def test_figures_are_written_and_reproducible(tmp_path: Path) -> None:
+    records = [make_record("stable_afl", condition="T1R1")]
+    logs = tmp_path / "logs" / "stable_afl"
+    logs.mkdir(parents=True)
+    lines = [
+        {
+            "epoch": e,
+            "losses": {"g": 1.0},
+            "val_auc": {"T1R1": 0.6 + 0.1 * e},
+            "source": SYNTH_LABEL,
+        }
+        for e in range(3)
+    ]
+    (logs / "train_log.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    out1, out2 = tmp_path / "lb1", tmp_path / "lb2"
+    build_leaderboard(records, out1, training_logs=tmp_path / "logs")
+    build_leaderboard(records, out2, training_logs=tmp_path / "logs")
+    files = _files(out1)
+    assert files == _files(out2)
+    pngs = {name for name in files if name.endswith(".png")}
+    assert pngs == {
+        f"figures/{SRC}/paper-00-v0-auc-heatmap.png",
+        f"figures/{SRC}/paper-00-v0-pr-stable-afl-v1.png",
+        f"figures/training-stability-{SRC}.png",
+    }
+    assert all(files[name].startswith(b"\x89PNG") for name in pngs)
+    assert b"Software" not in files[f"figures/{SRC}/paper-00-v0-auc-heatmap.png"]
+    assert (
+        f"[{SYNTH_LABEL}](figures/training-stability-{SRC}.png): stable_afl"
+        in files["index.md"].decode()
+    )
+
+
+def test_empty_results_never_wipe_a_leaderboard(tmp_path: Path) -> None:
+    with pytest.raises(DataError, match="no result records"):
+        build_leaderboard([], tmp_path)
+
+
+def test_cli_reports_corrupt_records_and_rebuilds(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "leaderboard"
+    records_dir = out / "records"
+    _write_all(records_dir, _paper_records())
+    bad = records_dir / "broken@1" / "SAFL__Synth00-T1R1-v0" / "seed-0.json"
+    bad.parent.mkdir(parents=True)
+    bad.write_text('{"schema": 1, "method": ')
+    assert cli_main(["leaderboard", "--out", str(out), "--no-figures"]) == 0
+    captured = capsys.readouterr()
+    assert str(bad) in captured.err and "not valid JSON" in captured.err
+    assert "| stable_afl | 1 | sequence | **90.9** | 58.4 |" in captured.out
+    index = (out / "index.md").read_text()
+    assert "broken@1/SAFL__Synth00-T1R1-v0/seed-0.json" in index
+    first = {p: p.read_bytes() for p in out.rglob("*.md")}
+    assert cli_main(["leaderboard", "--out", str(out), "--no-figures"]) == 0
+    assert {p: p.read_bytes() for p in out.rglob("*.md")} == first
+
+
+def test_cli_without_records_fails_cleanly(tmp_path: Path, capsys) -> None:
+    assert cli_main(["leaderboard", "--out", str(tmp_path / "lb")]) == 2
+    assert "no result records" in capsys.readouterr().err
+
+
+def test_training_log_bad_lines_are_reported(tmp_path: Path) -> None:
+    path = tmp_path / "m" / "train_log.jsonl"
+    path.parent.mkdir()
+    path.write_text(
+        '{"epoch": 0, "val_auc": {"T1R1": 0.5}}\n'
+        '{"epoch": 1, "val_auc": {"T1R1": NaN}}\n'
+        '{"epoch": 2, "val_auc": {"T1R1": 0.7}}\n'
+        '{"epoch": 2, "val_auc": {"T1R1": 0.8}}\n'
+        '{"epoch": 3, "val_au'
+    )
+    log, problems = read_training_log(path)
+    assert log is not None and log.epochs == [0, 2] and log.val_auc["T1R1"] == [0.5, 0.8]
+    assert log.source is None
+    assert [p.reason.split(":")[0] for p in problems] == ["line 2", "line 5"]
