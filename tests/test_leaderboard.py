@@ -15,7 +15,7 @@ from safl_bench.leaderboard import build_leaderboard
 from safl_bench.leaderboard.grouping import Cell, aggregate, condition_order, group_records
 from safl_bench.leaderboard.tables import auc_table, recall_table, revisit_table, time_table
 from safl_bench.leaderboard.training_logs import read_training_log
-from safl_bench.records import ResultRecord, write_record
+from safl_bench.records import ResultRecord, load_records, write_record
 
 
 def _paper_records() -> list[ResultRecord]:
@@ -275,3 +275,36 @@ def test_training_log_bad_lines_are_reported(tmp_path: Path) -> None:
     assert log is not None and log.epochs == [0, 2] and log.val_auc["T1R1"] == [0.5, 0.8]
     assert log.source is None
     assert [p.reason.split(":")[0] for p in problems] == ["line 2", "line 5"]
+
+
+REPO_BOARD = Path(__file__).resolve().parents[1] / "leaderboard"
+
+
+def _committed(build: Path, subdirs: tuple[str, ...]) -> None:
+    for sub in subdirs:
+        made = _files(build / sub) if (build / sub).is_dir() else {}
+        kept = _files(REPO_BOARD / sub) if (REPO_BOARD / sub).is_dir() else {}
+        assert sorted(made) == sorted(kept), f"{sub}: regenerate with `safl-bench leaderboard`"
+        for name in made:
+            assert made[name] == kept[name], f"{sub}/{name} differs from a regeneration"
+
+
+def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
+    records, problems = load_records(REPO_BOARD / "records")
+    if not records:
+        pytest.skip("no committed records in leaderboard/records yet")
+    assert problems == []
+    build_leaderboard(records, tmp_path, figures=False)
+    _committed(tmp_path, ("tables",))
+
+
+@pytest.mark.slow
+def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
+    records, problems = load_records(REPO_BOARD / "records")
+    if not records:
+        pytest.skip("no committed records in leaderboard/records yet")
+    build_leaderboard(
+        records, tmp_path, training_logs=REPO_BOARD / "training-logs", skipped=problems
+    )
+    _committed(tmp_path, ("tables", "figures"))
+    assert (tmp_path / "index.md").read_bytes() == (REPO_BOARD / "index.md").read_bytes()

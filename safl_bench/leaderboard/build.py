@@ -124,8 +124,6 @@ def build_leaderboard(
                 ("ms per frame (Table III)", timing, "time"),
             ):
                 md = table.markdown(level=1)
-                if stem == "auc" and figures:
-                    md += f"\n![AUC heat map](../../{heatmap})\n"
                 entry.tables.append((label, writer.text(f"tables/{base}-{stem}.md", md)))
                 writer.text(f"tables/{base}-{stem}.csv", table.csv())
             if report.headline is None or _headline_rank(key) < _headline_rank(report.headline.key):
