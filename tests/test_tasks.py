@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -275,3 +277,15 @@ def test_kitti_tasks_say_what_is_missing(
     monkeypatch.setenv("SAFL_KITTI_ROOT", str(kitti_root))
     with pytest.raises(DataError, match=r"SAFL/KITTI09-T1R1-v0.*09.*sequences under .*: 00"):
         tasks.make("SAFL/KITTI09-T1R1-v0")
+
+
+def test_import_registers_tasks_without_loading_data() -> None:
+    """`import safl_bench` registers every task with Gymnasium but builds nothing heavy."""
+    code = (
+        "import sys, safl_bench, gymnasium; "
+        "assert 'SAFL/KITTI08-Revisit-v0' in gymnasium.registry; "
+        "heavy = [m for m in ('torch', 'safl_bench.mapcache', 'safl_bench.tasks.task', 'pykitti') "
+        "if m in sys.modules]; "
+        "assert not heavy, heavy"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
