@@ -194,7 +194,7 @@ class MatchResult:
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _enhance_kernel(D, out, before, after):  # type: ignore[no-untyped-def]
+def _enhance_kernel(D, out, before, after):
     """out[i, j] = (D[i, j] - mean_W) / std_W(ddof=1), W = [j - before, j + after] clipped.
 
     Window sums from float64 prefix sums of the row minus one of its values (which limits
@@ -220,7 +220,7 @@ def _enhance_kernel(D, out, before, after):  # type: ignore[no-untyped-def]
             t2 += x * x
             c1[j + 1] = t1
             c2[j + 1] = t2
-        floor = 1e-12 * (c2[ndb] / ndb)
+        floor = 1e-12 * max(c2[ndb] / ndb - (c1[ndb] / ndb) ** 2, 0.0)  # x row variance
         # interior: j - before >= 0 and j + after + 1 <= ndb
         j0 = min(before, ndb)
         j1 = max(j0, ndb - after)
@@ -252,7 +252,7 @@ def _enhance_kernel(D, out, before, after):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _cand_range(offs, vi, k0, k1, ndb, jend, clip):  # type: ignore[no-untyped-def]
+def _cand_range(offs, vi, k0, k1, ndb, jend, clip):
     """Candidates [lo, hi) for velocity vi: all of [0, jend) when clipping, else those whose
     trajectory stays inside the database."""
     if clip:
@@ -267,7 +267,7 @@ def _cand_range(offs, vi, k0, k1, ndb, jend, clip):  # type: ignore[no-untyped-d
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out):  # type: ignore[no-untyped-def]
+def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out):
     nq, ndb = Dh.shape
     nv, L = offs.shape
     index = np.full(nq, -1, dtype=np.int64)
@@ -323,17 +323,16 @@ def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out
             best_s[T] = bval / cnt
             # the velocity: first one whose sum at jstar equals the minimum (same additions
             # in the same order as above, so the comparison is exact)
+            tot = np.full(nv, np.inf, dtype=Dh.dtype)
             for vi in range(nv):
                 alo, ahi = _cand_range(offs, vi, k0, k1, ndb, jend, clip)
                 if jstar < alo or jstar >= ahi:
                     continue
-                tot = best[jstar] * 0.0
+                tot[vi] = 0.0
                 for k in range(k0, k1):
                     c = min(max(jstar + offs[vi, k], 0), ndb - 1)
-                    tot += Dh[T + u_lo + k, c]
-                if tot == bval:
-                    vel[T] = vi
-                    break
+                    tot[vi] += Dh[T + u_lo + k, c]
+            vel[T] = np.argmin(np.abs(tot - bval))  # first exact match (difference 0)
             sv = np.inf
             for j in range(jend):
                 if abs(j - jstar) > half and best[j] < sv:
