@@ -22,14 +22,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from safl_bench.atomic import atomic_write_text
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.fingerprint import to_jsonable
-from safl_bench.provenance import Environment
+from safl_bench.provenance import Environment, collect_environment
+
+if TYPE_CHECKING:
+    from safl_bench.metrics import Metrics as Evaluation
+    from safl_bench.tasks.spec import TaskSpec
 
 SCHEMA_VERSION = 1
 #: Matching modes a record may hold; "sequence" is SeqSLAM, "single_frame" nearest neighbour.
@@ -227,6 +231,71 @@ def make_mode_result(
     return ModeResult(
         metrics=metrics,
         curves=Curves(pr=PRCurve(precision=p, recall=r), roc=ROCCurve(fpr=f, tpr=t)),
+    )
+
+
+def mode_result_from_evaluation(evaluation: Evaluation) -> ModeResult:
+    """A ModeResult from `safl_bench.metrics.evaluate`'s output (curves downsampled)."""
+    return make_mode_result(
+        Metrics(
+            recall_at_100_precision=float(evaluation.recall_at_100),
+            auc=None if evaluation.roc_auc is None else float(evaluation.roc_auc),
+            f1_max=float(evaluation.f1_max),
+            extended_precision=float(evaluation.extended_precision),
+            n_queries=int(evaluation.n_queries),
+            n_positives=int(evaluation.n_positive),
+        ),
+        precision=evaluation.precision,
+        recall=evaluation.recall,
+        fpr=evaluation.fpr,
+        tpr=evaluation.tpr,
+    )
+
+
+def task_info(spec: TaskSpec, source_label: str, **extra: Any) -> TaskInfo:
+    """TaskInfo of a task spec run on the data source labelled `source_label`.
+
+    `extra` (e.g. data_fingerprint=...) is stored in the spec dict beside the definition.
+    """
+    return TaskInfo(
+        id=spec.id,
+        version=int(spec.version),
+        protocol=spec.protocol,
+        sequence=spec.sequence,
+        condition=spec.condition.name if spec.protocol == "paper" else None,
+        source_kind=spec.source,
+        source_label=source_label,
+        spec={**spec.to_dict(), **to_jsonable(extra)},
+        spec_fingerprint=spec.fingerprint,
+    )
+
+
+def new_record(
+    *,
+    method: MethodInfo,
+    task: TaskInfo,
+    seed: int,
+    matcher: Any,
+    results: dict[str, ModeResult],
+    timings: Timings,
+    environment: Environment | None = None,
+) -> ResultRecord:
+    """A record stamped now (UTC), with this process's environment unless one is given.
+
+    `matcher` may be a dict or a dataclass such as `MatcherConfig` (stored as JSON).
+    """
+    matcher_json = to_jsonable(matcher)
+    if not isinstance(matcher_json, dict):
+        raise ConfigError(f"matcher settings must be a mapping or dataclass, got {matcher!r}")
+    return ResultRecord(
+        method=method,
+        task=task,
+        seed=int(seed),
+        matcher=matcher_json,
+        results=results,
+        timings=timings,
+        environment=environment if environment is not None else collect_environment(),
+        created=utc_now(),
     )
 
 

@@ -146,3 +146,32 @@ def test_environment_is_collected() -> None:
     assert env.cpu_cores >= 1 and env.cpu_model
     assert env.libraries["numpy"] == np.__version__
     assert env.git_revision
+
+
+def test_records_built_from_a_task_spec_and_an_evaluation(tmp_path: Path) -> None:
+    from safl_bench.matching import MatcherConfig
+    from safl_bench.metrics import evaluate
+    from safl_bench.records import MethodInfo, mode_result_from_evaluation, new_record, task_info
+    from safl_bench.tasks import spec
+
+    rng = np.random.default_rng(0)
+    evaluation = evaluate(rng.random(500), rng.random(500) < 0.6, np.ones(500, bool))
+    result = mode_result_from_evaluation(evaluation)
+    assert result.metrics.auc == pytest.approx(evaluation.roc_auc)
+    assert result.metrics.n_positives == 500
+    assert len(result.curves.pr.recall) <= MAX_CURVE_POINTS
+    paper = task_info(spec("SAFL/Synth00-T1R1-v0"), "synthetic default (seed 0)", data="abc")
+    assert (paper.protocol, paper.condition, paper.version) == ("paper", "T1R1", 0)
+    assert paper.spec["data"] == "abc" and paper.spec_fingerprint == paper.spec["fingerprint"]
+    revisit = task_info(spec("SAFL/Synth00-Revisit-v0"), "synthetic default (seed 0)")
+    assert revisit.condition is None and revisit.protocol == "revisit"
+    record = new_record(
+        method=MethodInfo("sad", "1", {"size": 32}),
+        task=paper,
+        seed=0,
+        matcher=MatcherConfig(),
+        results={"sequence": result, "single_frame": result},
+        timings=make_record().timings,
+    )
+    assert record.matcher["ds"] == 10 and record.created.endswith("Z")
+    assert load_record(write_record(tmp_path, record)) == record
