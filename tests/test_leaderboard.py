@@ -308,3 +308,8 @@ def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
     )
     _committed(tmp_path, ("tables", "figures"))
     assert (tmp_path / "index.md").read_bytes() == (REPO_BOARD / "index.md").read_bytes()
+
+
+def test_equal_values_are_not_bold() -> None:
+    records = [make_record(m, condition="T1R1", recall=0.5) for m in ("a", "b")]
+    assert "**" not in _table(records).markdown()

@@ -39,7 +39,7 @@ class ValueFormat:
     """How a column's values are shown: multiplied by `scale`, `decimals` digits.
 
     `better` ("higher" or "lower") makes the Markdown bold the best value of each column among
-    rows of the same matching mode; None bolds nothing.
+    rows of the same matching mode (ties all bold, nothing when all are equal); None bolds nothing.
     """
 
     scale: float = 1.0
@@ -97,6 +97,8 @@ class Table:
                 if len(entries) < 2:
                     continue
                 values = [v for v, _ in entries]
+                if len(set(values)) == 1:
+                    continue  # all equal: nothing stands out
                 target = max(values) if fmt.better == "higher" else min(values)
                 best.update((i, j) for v, i in entries if v == target)
         return best
