@@ -68,9 +68,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"problem: {args.n} x {args.n}, {args.dim}-d float32 descriptors; "
           f"{env['cpu_model']}, {env['usable_cpus']} CPUs, numba threads {env['numba_threads']}")
     print(f"descriptors -> matches: median {e2e['median_s']:.3f} s (min {e2e['min_s']:.3f}, "
-          f"{e2e['repeats']} runs), peak +{e2e['peak_mb']:.0f} MB ({e2e['memory_method']})")
-    print(f"  distance matrix     : median {dist['median_s']:.3f} s")
-    print(f"  enhancement+search  : median {srch['median_s']:.3f} s, "
+          f"{e2e['repeats']} runs; CPU {e2e['median_cpu_s']:.3f} s), "
+          f"peak +{e2e['peak_mb']:.0f} MB ({e2e['memory_method']}); load avg {env['load_avg_1m']}")
+    print(f"  distance matrix     : median {dist['median_s']:.3f} s "
+          f"(CPU {dist['median_cpu_s']:.3f} s)")
+    print(f"  enhancement+search  : median {srch['median_s']:.3f} s "
+          f"(CPU {srch['median_cpu_s']:.3f} s), "
           f"peak +{srch['peak_mb']:.0f} MB")
     print(f"plain loop on {lr['n']} x {lr['n']}: {lr['loop_s']:.2f} s vs vectorised "
           f"{lr['vectorised_s'] * 1e3:.2f} ms -> {lr['ratio']:.0f}x")

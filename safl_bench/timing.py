@@ -2,7 +2,8 @@
 environment each figure was taken in.
 
 Every figure is the median of `repeats` timed runs after `warmup` untimed ones
-(time.perf_counter). A "method" is anything with ``describe(maps) -> (N, D)``.
+(time.perf_counter), with the process CPU time beside it and the load average in the environment:
+on a shared machine wall time grows with other people's work, CPU time much less. A "method" is anything with ``describe(maps) -> (N, D)``.
 
 Peak memory is the process's resident set size (RSS), which sees numpy, numba and torch CPU
 allocations alike (tracemalloc would miss torch's and numba's): the kernel's high-water mark
@@ -65,6 +66,7 @@ class Environment:
     numba_threads: int | None
     thread_env: dict[str, str]
     versions: dict[str, str]
+    load_avg_1m: float | None  # other work on the machine inflates wall times
 
 
 def environment() -> Environment:
@@ -91,7 +93,8 @@ def environment() -> Environment:
         python=platform.python_version(), torch_threads=torch_threads,
         numba_threads=numba_threads,
         thread_env={k: os.environ[k] for k in _THREAD_VARS if k in os.environ},
-        versions=versions)
+        versions=versions,
+        load_avg_1m=os.getloadavg()[0] if hasattr(os, "getloadavg") else None)
 
 
 # --------------------------------------------------------------------------- memory
@@ -147,6 +150,7 @@ class Timing:
     median_s: float
     min_s: float
     times_s: list[float]
+    median_cpu_s: float  # process CPU time (all threads) per run, less sensitive to contention
     repeats: int
     warmup: int
     n_items: int  # frames (or queries) per timed call
@@ -180,13 +184,17 @@ def time_call(
     for _ in range(warmup):
         fn()
     times = []
+    cpu = []
     for _ in range(repeats):
+        c0 = time.process_time()
         t0 = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
     mem = measure_peak(fn)[1] if memory else MemoryPeak(None, None, "not measured")
     med = statistics.median(times)
-    return Timing(name=name, median_s=med, min_s=min(times), times_s=times, repeats=repeats,
+    return Timing(name=name, median_s=med, min_s=min(times), times_s=times,
+                  median_cpu_s=statistics.median(cpu), repeats=repeats,
                   warmup=warmup, n_items=n_items, per_item_ms=med / max(n_items, 1) * 1e3,
                   peak_mb=mem.peak_mb, peak_rss_mb=mem.peak_rss_mb, memory_method=mem.method,
                   env=environment())
