@@ -10,6 +10,8 @@ is the (Nq, Ndb) output itself.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .errors import DataError
@@ -51,7 +53,7 @@ def sqeuclidean(
         raise DataError(
             f"query and database descriptors differ in length: {q.shape[1]} vs {b.shape[1]}"
         )
-    ft = _DTYPES[dtype]
+    ft: Any = _DTYPES[dtype]
     centre = b.mean(axis=0, dtype=np.float64)
     bc = np.ascontiguousarray((b - centre).astype(ft, copy=False))
     bn = np.einsum("ij,ij->i", bc, bc, dtype=ft)
@@ -63,8 +65,8 @@ def sqeuclidean(
         qn = np.einsum("ij,ij->i", qc, qc, dtype=ft)
         block = out[lo:hi]
         np.matmul(qc, bt, out=block)
-        block *= ft(-2.0)
+        block *= -2.0
         block += qn[:, None]
         block += bn[None, :]
-        np.maximum(block, ft(0.0), out=block)
+        np.maximum(block, 0.0, out=block)
     return out
