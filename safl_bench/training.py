@@ -1,0 +1,322 @@
+"""Adversarial feature learning: the shared base class of BiGAN and Stable-AFL and its
+deterministic, resumable training loop.
+
+`AdversarialMethod` holds an encoder En (the descriptor), a decoder De and whatever critics a
+subclass adds; a subclass implements `build_networks`, `build_optimizers` and `train_step`.
+`fit(maps, epochs=, batch_size=, seed=, checkpoint_dir=, callback=)`:
+
+* is deterministic for a seed on the CPU: the networks are initialised from `seed`, and each
+  epoch draws its batch order and noise from a `torch.Generator` (and the global torch RNG, for
+  dropout) seeded from (seed, epoch), so an epoch does not depend on how the run got there. The
+  CPU kernels used (convolutions, matrix products, batch norm) are deterministic for a fixed
+  thread count, which the tests check; `torch.use_deterministic_algorithms` is not switched on
+  because on this torch it imports the inductor compiler (5 s) and changes nothing on the CPU;
+* after every epoch, when `checkpoint_dir` is given, atomically writes `last.safetensors` (all
+  networks + flattened optimizer states; scalars as JSON metadata; see `safl_bench.weights`)
+  and `log.jsonl` (one JSON object per epoch: mean losses, steps, seconds, and whatever
+  `callback(epoch, method)` returns, e.g. a validation AUC);
+* resumes from `last.safetensors` when it exists (same parameters and data required), so
+  "2 epochs" and "1 epoch, interrupted, then resumed to 2" give identical weights.
+
+An epoch is one pass over the shuffled maps in batches (the last incomplete batch is dropped);
+a training step consumes `batches_per_step` batches (WGAN's critic iterations each take a
+fresh batch, as in Arjovsky et al.'s reference code).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, ClassVar, Self
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from safl_bench.atomic import atomic_write_text
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.fingerprint import fingerprint
+from safl_bench.method import Method, Views, as_topview
+from safl_bench.weights import (
+    load_module_tensors,
+    load_optimizer_tensors,
+    load_tensors,
+    module_tensors,
+    optimizer_tensors,
+    save_tensors,
+)
+
+CHECKPOINT = "last.safetensors"
+LOG = "log.jsonl"
+
+Callback = Callable[[int, "AdversarialMethod"], dict[str, Any] | None]
+
+
+def epoch_seed(seed: int, epoch: int) -> int:
+    """The RNG seed of one epoch, derived from the run's seed (independent streams)."""
+    return int(np.random.SeedSequence([int(seed), int(epoch)]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def data_fingerprint(x: np.ndarray) -> str:
+    """Fingerprint of a training set (shape + bytes), stored in checkpoints."""
+    import hashlib
+
+    digest = hashlib.sha256(np.ascontiguousarray(x).tobytes()).hexdigest()[:16]
+    return fingerprint(list(x.shape), str(x.dtype), digest)
+
+
+class AdversarialMethod(Method):
+    """Base class of encoder-based adversarial feature learners (see the module docstring).
+
+    Subclasses set `self.code_size`, `self.image_size`, `self.width`, `self.seed`, `self.epochs`,
+    `self.batch_size`, `self.prior`, `self.describe_batch` in their constructor and call
+    `self._init_networks()` at its end.
+    """
+
+    trainable = True
+    runtime_params: ClassVar[tuple[str, ...]] = ("describe_batch",)
+    #: networks that make up a saved inference model (the encoder alone suffices to describe)
+    inference_parts: ClassVar[tuple[str, ...]] = ("encoder", "decoder")
+
+    code_size: int
+    image_size: int
+    width: int
+    seed: int
+    epochs: int
+    batch_size: int
+    prior: str
+    describe_batch: int
+
+    # -- to implement --------------------------------------------------------------------------
+    def build_networks(self) -> dict[str, nn.Module]:
+        """All networks, freshly initialised (the global torch RNG is seeded by the caller)."""
+        raise NotImplementedError
+
+    def build_optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        """The optimizers over `self.nets`."""
+        raise NotImplementedError
+
+    def train_step(self, batches: Sequence[torch.Tensor], gen: torch.Generator) -> dict[str, float]:
+        """One training step on `batches_per_step` batches of (B,1,S,S) maps in [-1,1]."""
+        raise NotImplementedError
+
+    @property
+    def batches_per_step(self) -> int:
+        return 1
+
+    # -- networks ------------------------------------------------------------------------------
+    def _init_networks(self) -> None:
+        if self.prior not in ("uniform", "normal"):
+            raise ConfigError(f"{self.name}: prior must be 'uniform' or 'normal', got {self.prior!r}")
+        for key in ("code_size", "width", "epochs", "batch_size", "describe_batch"):
+            value = getattr(self, key)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ConfigError(f"{self.name}: {key} must be a positive integer, got {value!r}")
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(int(self.seed))
+            self.nets: dict[str, nn.Module] = self.build_networks()
+        self.optims: dict[str, torch.optim.Optimizer] | None = None
+        self._loaded_parts: tuple[str, ...] = tuple(self.nets)
+        for net in self.nets.values():
+            net.eval()
+
+    @property
+    def encoder(self) -> nn.Module:
+        return self.nets["encoder"]
+
+    @property
+    def decoder(self) -> nn.Module:
+        return self.nets["decoder"]
+
+    def sample_prior(self, n: int, gen: torch.Generator) -> torch.Tensor:
+        """z ~ P_z: uniform on [-1, 1]^d (BiGAN's choice; default) or standard normal."""
+        if self.prior == "uniform":
+            return torch.rand(n, self.code_size, generator=gen) * 2.0 - 1.0
+        return torch.randn(n, self.code_size, generator=gen)
+
+    def to_input(self, maps: Views) -> torch.Tensor:
+        """Maps (N,H,W) in [0,1] -> (N,1,S,S) in [-1,1], resized to image_size if needed."""
+        arr = as_topview(maps)
+        x = torch.from_numpy(np.ascontiguousarray(arr))[:, None]
+        if x.shape[-2:] != (self.image_size, self.image_size) and len(x):
+            x = F.interpolate(x, size=(self.image_size, self.image_size), mode="bilinear",
+                              antialias=True, align_corners=False)
+        return x * 2.0 - 1.0
+
+    # -- inference -----------------------------------------------------------------------------
+    def describe(self, maps: Views) -> np.ndarray:
+        """En(x): (N, code_size) float32, eval mode, no gradients, in chunks of describe_batch."""
+        x = self.to_input(maps)
+        enc = self.encoder
+        enc.eval()
+        out = np.empty((len(x), self.code_size), np.float32)
+        with torch.inference_mode():
+            for lo in range(0, len(x), self.describe_batch):
+                out[lo : lo + self.describe_batch] = enc(x[lo : lo + self.describe_batch]).numpy()
+        return out
+
+    def reconstruct(self, maps: Views) -> np.ndarray:
+        """De(En(x)) as maps in [0, 1], (N, S, S) float32."""
+        if "decoder" not in self._loaded_parts:
+            raise ConfigError(f"{self.name}: these weights hold no decoder, so nothing can be reconstructed")
+        x = self.to_input(maps)
+        with torch.inference_mode():
+            self.encoder.eval()
+            self.decoder.eval()
+            rec = self.decoder(self.encoder(x))[:, 0]
+        return ((rec + 1.0) / 2.0).clamp(0.0, 1.0).numpy().astype(np.float32)
+
+    # -- state ---------------------------------------------------------------------------------
+    def state_tensors(self, parts: Sequence[str] | None = None) -> dict[str, torch.Tensor]:
+        names = tuple(parts) if parts else self.inference_parts
+        unknown = [p for p in names if p not in self.nets]
+        if unknown:
+            raise ConfigError(f"{self.name}: no network(s) {unknown}; have {sorted(self.nets)}")
+        missing = [p for p in names if p not in self._loaded_parts]
+        if missing:
+            raise ConfigError(f"{self.name}: network(s) {missing} were not loaded, so cannot be saved")
+        return module_tensors({p: self.nets[p] for p in names})
+
+    def load_state_tensors(self, tensors: dict[str, torch.Tensor], *, source: str) -> None:
+        present = tuple(p for p in self.nets if any(k.startswith(f"net/{p}/") for k in tensors))
+        if "encoder" not in present:
+            raise DataError(f"{source} holds no encoder weights for {self.name}")
+        load_module_tensors({p: self.nets[p] for p in present}, tensors, source=source)
+        self._loaded_parts = present
+        for net in self.nets.values():
+            net.eval()
+
+    # -- training ------------------------------------------------------------------------------
+    def fit(
+        self,
+        maps: Views,
+        *,
+        epochs: int | None = None,
+        batch_size: int | None = None,
+        seed: int | None = None,
+        checkpoint_dir: str | Path | None = None,
+        callback: Callback | None = None,
+        progress: bool = False,
+    ) -> Self:
+        """Train from scratch (or resume from `checkpoint_dir`); see the module docstring.
+
+        `epochs`, `batch_size` and `seed` default to the constructor's values and, when given,
+        replace them (so `config()` and saved weights record what was actually run)."""
+        self.set_params(**{k: v for k, v in (("epochs", epochs), ("batch_size", batch_size), ("seed", seed)) if v is not None})
+        train(self, maps, checkpoint_dir=checkpoint_dir, callback=callback, progress=progress)
+        return self
+
+
+def _checkpoint_key(method: AdversarialMethod, data_fp: str) -> dict[str, Any]:
+    params = {k: v for k, v in method.get_params().items() if k not in ("epochs", *method.runtime_params)}
+    return {"name": method.name, "version": method.version, "params": params, "data": data_fp}
+
+
+def save_checkpoint(method: AdversarialMethod, directory: Path, epoch: int, key: dict[str, Any]) -> None:
+    """Write every network and optimizer state after `epoch` completed epochs (atomic)."""
+    assert method.optims is not None
+    tensors = module_tensors(method.nets)
+    opt_tensors, opt_scalars = optimizer_tensors(method.optims)
+    tensors.update(opt_tensors)
+    save_tensors(directory / CHECKPOINT, tensors, {"kind": "checkpoint", "epoch": epoch, "key": key, "optimizers": opt_scalars})
+
+
+def load_checkpoint(method: AdversarialMethod, directory: Path, key: dict[str, Any]) -> int:
+    """Restore networks and optimizers from `directory`; returns the completed epochs."""
+    path = directory / CHECKPOINT
+    tensors, meta = load_tensors(path)
+    if meta.get("kind") != "checkpoint":
+        raise DataError(f"{path} is not a training checkpoint")
+    if meta.get("key") != json.loads(json.dumps(key)):
+        raise ConfigError(
+            f"the checkpoint {path} was made with other settings or data "
+            f"({meta.get('key')} vs {key}); use another output directory or remove it"
+        )
+    assert method.optims is not None
+    load_module_tensors(method.nets, tensors, source=path)
+    load_optimizer_tensors(method.optims, tensors, meta["optimizers"], source=path)
+    return int(meta["epoch"])
+
+
+def read_log(directory: Path, upto: int) -> list[dict[str, Any]]:
+    """The per-epoch log records of epochs 1..upto."""
+    path = directory / LOG
+    if not path.is_file():
+        return []
+    records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    return [r for r in records if r.get("epoch", 0) <= upto]
+
+
+def write_log(directory: Path, records: list[dict[str, Any]]) -> None:
+    atomic_write_text(directory / LOG, "".join(json.dumps(r, sort_keys=True) + "\n" for r in records))
+
+
+def train(
+    method: AdversarialMethod,
+    maps: Views,
+    *,
+    checkpoint_dir: str | Path | None = None,
+    callback: Callback | None = None,
+    progress: bool = False,
+) -> list[dict[str, Any]]:
+    """The training loop behind `AdversarialMethod.fit`; returns the per-epoch log."""
+    x_all = method.to_input(maps)
+    n, batch, k = len(x_all), method.batch_size, method.batches_per_step
+    steps = (n // batch) // k
+    if steps < 1:
+        raise ConfigError(
+            f"{method.name}: {n} training maps are too few for batch_size={batch} with {k} "
+            f"batch(es) per step; need at least {batch * k}"
+        )
+    directory = Path(checkpoint_dir) if checkpoint_dir is not None else None
+    key = _checkpoint_key(method, data_fingerprint(x_all.numpy()))
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(method.seed))
+        method.nets = method.build_networks()
+        method.optims = method.build_optimizers()
+        method._loaded_parts = tuple(method.nets)
+        done, log = 0, []
+        if directory is not None and (directory / CHECKPOINT).is_file():
+            done = load_checkpoint(method, directory, key)
+            log = read_log(directory, done)
+
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=(method.epochs - min(done, method.epochs)) * steps, desc=f"train {method.name}", unit="step")
+        for epoch in range(done, method.epochs):
+            started = time.perf_counter()
+            gen = torch.Generator().manual_seed(epoch_seed(method.seed, epoch))
+            torch.manual_seed(epoch_seed(method.seed, epoch) ^ 0x5EED)
+            for net in method.nets.values():
+                net.train()
+            order = torch.randperm(n, generator=gen)
+            sums: dict[str, float] = {}
+            for s in range(steps):
+                batches = [x_all[order[(s * k + j) * batch : (s * k + j + 1) * batch]] for j in range(k)]
+                for name, value in method.train_step(batches, gen).items():
+                    sums[name] = sums.get(name, 0.0) + float(value)
+                if bar is not None:
+                    bar.update(1)
+                    bar.set_postfix({name: f"{v / (s + 1):.3g}" for name, v in list(sums.items())[:3]})
+            for net in method.nets.values():
+                net.eval()
+            record: dict[str, Any] = {"epoch": epoch + 1, "steps": steps}
+            record.update({name: v / steps for name, v in sums.items()})
+            record["seconds"] = round(time.perf_counter() - started, 3)
+            if callback is not None:
+                record.update(callback(epoch + 1, method) or {})
+            log.append(record)
+            if directory is not None:
+                save_checkpoint(method, directory, epoch + 1, key)
+                write_log(directory, log)
+        if bar is not None:
+            bar.close()
+    for net in method.nets.values():
+        net.eval()
+    return log
