@@ -1,7 +1,8 @@
 """The streaming environment: one query top-view map per step, answered with a database index.
 
 After `import safl_bench`, `gymnasium.make("SAFL/Synth00-T5R1.5-v0")` returns it (KITTI tasks
-take `kitti_root=...` as a make keyword, or $SAFL_KITTI_ROOT).
+take `kitti_root=...` as a make keyword, or $SAFL_KITTI_ROOT; `progress=False` silences the
+progress bars of a first run, which generates the synthetic data and renders the maps).
 
 - observation: the current query map, Box(0, 1, (H, W), float32).
 - action: Discrete(Ndb + 1): a database index, or Ndb (= `env.unwrapped.no_match`) for "no match".
@@ -48,7 +49,7 @@ class TaskEnv(gymnasium.Env):
         *,
         task: Task | None = None,
         kitti_root: str | None = None,
-        progress: bool = False,
+        progress: bool = True,
     ) -> None:
         if task is None:
             if task_id is None:

@@ -32,12 +32,13 @@ if TYPE_CHECKING:
 KINDS = ("topview", "points")
 
 
-def open_source(spec: TaskSpec, kitti_root: str | None = None) -> DataSource:
-    """The data source a spec names: the embedded default or the KITTI root (explicit or env)."""
+def open_source(spec: TaskSpec, kitti_root: str | None = None, progress: bool = True) -> DataSource:
+    """The data source a spec names: the embedded default (generated on first use) or the KITTI
+    root (`kitti_root`, else $SAFL_KITTI_ROOT)."""
     from safl_bench import datasource, paths
 
     if spec.source == "synth":
-        return datasource.synth_source(seed=spec.data_seed, sequences=(spec.sequence,))
+        return datasource.synth_source(seed=spec.data_seed, sequences=(spec.sequence,), progress=progress)
     try:
         root = paths.kitti_root(kitti_root)
     except DataError as exc:
@@ -103,7 +104,7 @@ class Task:
     ) -> Task:
         """Open the spec's data source and sequence (or `source`, of the same kind)."""
         if source is None:
-            source = open_source(spec, kitti_root)
+            source = open_source(spec, kitti_root, progress)
         elif source.kind != spec.source:
             raise ConfigError(
                 f"task {spec.id} runs on {spec.source} data, got a {source.kind} source"
