@@ -1,17 +1,45 @@
-"""`safl-bench data synth`: not available yet (issue #2)."""
+"""`safl-bench data synth`: generate the embedded synthetic dataset in the KITTI odometry layout."""
 
 from __future__ import annotations
 
 import argparse
+import time
+from pathlib import Path
 
-from safl_bench.errors import SaflError
+from safl_bench.errors import DataError
 
-HELP = "(not available yet: issue #2)"
+HELP = "generate the synthetic town + simulated 64-beam LiDAR sequences (KITTI odometry layout)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No arguments until the command lands."""
+    """Flags of `data synth`."""
+    parser.add_argument("--out", metavar="DIR", default=None,
+                        help="dataset root to write (default: the default root of the seed, "
+                             "$SAFL_HOME/synth/seed-N)")
+    parser.add_argument("--sequences", nargs="+", metavar="XX", default=None,
+                        help="sequences to generate (default: test 00 09 and training 01-04)")
+    parser.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def main(args: argparse.Namespace) -> int:
-    raise SaflError("this command is not available yet (issue #2)")
+    from safl_bench import synth
+
+    seed = synth.DEFAULT_SEED if args.seed is None else args.seed
+    if seed < 0:
+        raise DataError(f"--seed must be >= 0, got {seed}")
+    root = Path(args.out).expanduser() if args.out else synth.default_root(seed)
+    sequences = list(args.sequences) if args.sequences else list(synth.ALL_SEQUENCES)
+    for name in sequences:
+        if name not in synth.ALL_SEQUENCES:
+            raise DataError(f"unknown synthetic sequence {name!r}; known: {' '.join(synth.ALL_SEQUENCES)}")
+    start = time.perf_counter()
+    todo = [n for n in sequences if not synth.is_current(root, n, seed)]
+    synth.ensure(root, sequences, seed=seed, progress=not args.quiet)
+    took = time.perf_counter() - start
+    done = ", ".join(sequences)
+    if todo:
+        print(f"generated {', '.join(todo)} in {took:.1f} s; sequences {done} are in {root}")
+    else:
+        print(f"sequences {done} already up to date in {root}")
+    return 0

@@ -25,7 +25,7 @@ _MASK53 = 1.0 / 9007199254740992.0  # 2**-53
 
 
 @numba.njit(cache=True, inline="always")
-def _uniform(key: np.uint64, ray: np.int64, draw: np.int64) -> float:
+def _uniform(key: np.uint64, ray: int, draw: int) -> float:
     """A uniform number in [0, 1) from a splitmix64 hash of (key, ray, draw)."""
     z = (key + np.uint64(ray) * np.uint64(0x9E3779B97F4A7C15)
          + np.uint64(draw) * np.uint64(0xD1B54A32D192ED03))
@@ -36,7 +36,7 @@ def _uniform(key: np.uint64, ray: np.int64, draw: np.int64) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def _normal(key: np.uint64, ray: np.int64, draw: np.int64) -> float:
+def _normal(key: np.uint64, ray: int, draw: int) -> float:
     u1 = _uniform(key, ray, draw)
     u2 = _uniform(key, ray, draw + 1)
     return math.sqrt(-2.0 * math.log(1.0 - u1)) * math.cos(2.0 * math.pi * u2)
@@ -44,7 +44,7 @@ def _normal(key: np.uint64, ray: np.int64, draw: np.int64) -> float:
 
 @numba.njit(cache=True, nogil=True)
 def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fmat, coarse, block,
-              refl_mean, refl_sd, pass_prob, max_range, noise_sd, dropout, key, out):  # type: ignore[no-untyped-def]
+              refl_mean, refl_sd, pass_prob, max_range, noise_sd, dropout, key, out):
     """Cast rays `dirs` (n,3, sensor frame, unit) from a sensor at `rot`, `origin` (world).
 
     Writes returns as rows (x, y, z, reflectance) in the sensor frame into `out` (n,4) and
@@ -62,8 +62,8 @@ def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fm
         dy = rot[1, 0] * sx + rot[1, 1] * sy + rot[1, 2] * sz
         dz = rot[2, 0] * sx + rot[2, 1] * sy + rot[2, 2] * sz
         hxy = math.sqrt(dx * dx + dy * dy)
-        cx = int(math.floor(ox / cell))
-        cy = int(math.floor(oy / cell))
+        cx = math.floor(ox / cell)
+        cy = math.floor(oy / cell)
         if dx > 0:
             stepx, tmaxx, tdx = 1, ((cx + 1) * cell - ox) / dx, cell / dx
         elif dx < 0:
@@ -97,11 +97,11 @@ def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fm
                         break
                     if tbx < tby:
                         cx = (bx + 1) * block if dx > 0 else bx * block - 1
-                        cy = int(math.floor((oy + t_exit * dy) / cell))
+                        cy = math.floor((oy + t_exit * dy) / cell)
                         axis = 0
                     else:
                         cy = (by + 1) * block if dy > 0 else by * block - 1
-                        cx = int(math.floor((ox + t_exit * dx) / cell))
+                        cx = math.floor((ox + t_exit * dx) / cell)
                         axis = 1
                     t_in = t_exit
                     if stepx != 0:
@@ -181,7 +181,7 @@ class Lidar:
     def __init__(self, config: SynthConfig, rng: np.random.Generator) -> None:
         self.config = config
         self.elevations = np.radians(config.elevations_deg())
-        self.n_azimuth = int(round(360.0 / config.azimuth_res_deg))
+        self.n_azimuth = round(360.0 / config.azimuth_res_deg)
         beam_gain = rng.uniform(0.85, 1.15, size=len(self.elevations))
         self.gain = np.repeat(beam_gain, self.n_azimuth).astype(np.float64)
 

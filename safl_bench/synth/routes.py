@@ -9,6 +9,7 @@ corners on arcs, slows down for them, and varies its cruise speed a little.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,7 +62,7 @@ def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator) -> lis
 
 def walk_revisits(walk: list[tuple[int, int]]) -> tuple[bool, bool]:
     """Whether a walk drives some street again in the same / the opposite direction."""
-    edges = list(zip(walk[:-1], walk[1:], strict=True))
+    edges = list(itertools.pairwise(walk))
     seen = set()
     same = opposite = False
     for a, b in edges:
@@ -114,7 +115,7 @@ def _smooth_noise(n: int, rng: np.random.Generator, corr: float, scale: float) -
 
 
 def _drive(grid: StreetGrid, walk: list[tuple[int, int]], frames: int, cruise: float,
-           rate_hz: float, rng: np.random.Generator):  # type: ignore[no-untyped-def]
+           rate_hz: float, rng: np.random.Generator):
     """Drive the walk: world path (x, y, arc length s, heading) and frame arc positions."""
     centre, ends = _centre_line(grid, walk, step=0.25)
     tangent = np.gradient(centre, axis=0)
@@ -215,3 +216,22 @@ def sensor_poses(traj: Trajectory, sensor_height: float) -> np.ndarray:
     poses[:, 2, 3] = sensor_height
     poses[:, 3, 3] = 1.0
     return poses
+
+
+def revisit_kinds(positions: np.ndarray, headings: np.ndarray, times: np.ndarray, *,
+                  radius: float = 5.0, min_gap_s: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, whether it revisits an older place (more than `min_gap_s` earlier, within
+    `radius` m) driving the same way (heading within 45 deg) / the opposite way (beyond 135 deg).
+
+    `radius` defaults to 5 m because opposite lanes are ~3 m apart.
+    """
+    from safl_bench.groundtruth import loop_pairs
+
+    pairs = loop_pairs(positions, times, radius, min_gap_s)
+    same = np.zeros(len(positions), dtype=bool)
+    opposite = np.zeros(len(positions), dtype=bool)
+    if len(pairs):
+        diff = np.abs(np.angle(np.exp(1j * (headings[pairs[:, 0]] - headings[pairs[:, 1]]))))
+        same[pairs[diff < np.pi / 4, 0]] = True
+        opposite[pairs[diff > 3 * np.pi / 4, 0]] = True
+    return same, opposite

@@ -84,8 +84,8 @@ def make_street_grid(lines: int, rng: np.random.Generator) -> StreetGrid:
     def axis() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         spacing = rng.uniform(70.0, 115.0, size=max(lines - 1, 0))
         pos = MARGIN_M + np.concatenate([[0.0], np.cumsum(spacing)])
-        half = rng.choice([4.5, 5.5, 6.5], size=lines)
-        walk = rng.choice([2.0, 3.0, 4.0], size=lines)
+        half = rng.choice([4.5, 5.0, 6.0], size=lines)
+        walk = rng.choice([1.5, 2.5, 3.5], size=lines)
         return pos, half, walk, float(pos[-1] + MARGIN_M)
 
     u, uh, uw, size_u = axis()

@@ -53,7 +53,13 @@ class World:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.ground.shape  # type: ignore[return-value]
+        return self.ground.shape
+
+
+def _span(ab: tuple[float, float]) -> tuple[float, float]:
+    """The two ends of a range in increasing order."""
+    a, b = ab
+    return (a, b) if a <= b else (b, a)
 
 
 class _Plan:
@@ -229,12 +235,12 @@ class _Town:
                     u, v = self.point(vertical, a, x + side * (half + 0.4))
                     self.p.disc_solid(u, v, 0.06, 2.6, M.POLE)
                     self.p.floating(u - 0.35, u + 0.35, v - 0.35, v + 0.35, 2.0, 2.7, M.SIGN)
-                if walk >= 3.0 and rng.random() < 0.55:  # tree-lined street
+                if walk >= 2.5 and rng.random() < 0.55:  # tree-lined street
                     step = rng.uniform(8.5, 13.0)
                     for a in np.arange(a0 + rng.uniform(3, 8), a1 - 3, step):
                         u, v = self.point(vertical, float(a + rng.normal(0, 0.4)), walk_mid)
                         self.tree(u, v, scale=0.85)
-                if a1 - a0 > 25 and rng.random() < 0.6:  # parked cars along the kerb
+                if a1 - a0 > 25 and rng.random() < 0.7:  # parked cars along the kerb
                     a = a0 + rng.uniform(6, 10)
                     while a < a1 - 10:
                         if rng.random() < 0.72:
@@ -264,14 +270,14 @@ class _Town:
         edges.append(size)
         return [(edges[k], edges[k + 1]) for k in range(0, len(edges), 2)]
 
-    def _sides(self, u0: float, u1: float, v0: float, v1: float):  # type: ignore[no-untyped-def]
+    def _sides(self, u0: float, u1: float, v0: float, v1: float) -> list[tuple[bool, float, float, float, float]]:
         """The four sides of a block: (vertical, along0, along1, edge, inward sign)."""
         return [(True, v0, v1, u0, 1.0), (True, v0, v1, u1, -1.0),
                 (False, u0, u1, v0, 1.0), (False, u0, u1, v1, -1.0)]
 
     def block_urban(self, u0: float, u1: float, v0: float, v1: float) -> None:
         rng = self.rng
-        setback = float(rng.choice([0.0, 0.5, 1.5, 3.0, 5.0]))
+        setback = float(rng.choice([0.0, 0.0, 0.5, 1.5, 3.0]))
         heights = (7.0, 9.5, 12.0, 15.0, 18.0, 22.0)
         depth_max = max(min(u1 - u0, v1 - v0) / 2 - 1.0, 4.0)
         for vertical, a0, a1, edge, inward in self._sides(u0, u1, v0, v1):
@@ -281,19 +287,19 @@ class _Town:
                 depth = min(rng.uniform(9, 16), depth_max)
                 height = float(rng.choice(heights)) + rng.uniform(-0.4, 0.4)
                 c0 = edge + inward * setback
-                self.box(vertical, a, a + width, *sorted((c0, c0 + inward * depth)), height, int(rng.choice(M.FACADES)))
+                self.box(vertical, a, a + width, *_span((c0, c0 + inward * depth)), height, int(rng.choice(M.FACADES)))
                 if rng.random() < 0.25:  # an L-shaped wing to the back
                     wing = width * rng.uniform(0.25, 0.45)
                     w0 = a if rng.random() < 0.5 else a + width - wing
                     deeper = min(depth + rng.uniform(4, 10), depth_max)
-                    self.box(vertical, w0, w0 + wing, *sorted((c0, c0 + inward * deeper)), height, int(rng.choice(M.FACADES)))
+                    self.box(vertical, w0, w0 + wing, *_span((c0, c0 + inward * deeper)), height, int(rng.choice(M.FACADES)))
                 a += width + float(rng.choice([0.0, 0.0, 0.0, 1.5, 3.0, 6.0]))
         for _ in range(int(rng.integers(0, 4))):  # courtyard trees
             self.tree(rng.uniform(u0 + 20, max(u1 - 20, u0 + 21)), rng.uniform(v0 + 20, max(v1 - 20, v0 + 21)))
 
     def block_residential(self, u0: float, u1: float, v0: float, v1: float) -> None:
         rng = self.rng
-        setback = rng.uniform(4.0, 7.0)
+        setback = rng.uniform(3.0, 6.0)
         boundary = int(rng.integers(0, 4))  # 0 none, 1 hedge, 2 fence, 3 wall
         house_w, house_d = rng.uniform(8, 12), rng.uniform(8, 11)  # one house type per block
         heights = (5.5, 6.5, 7.5, 9.0)
@@ -301,7 +307,7 @@ class _Town:
             a = a0 + setback + 2
             while a < a1 - setback - house_w:
                 c0 = edge + inward * setback
-                self.box(vertical, a, a + house_w, *sorted((c0, c0 + inward * house_d)),
+                self.box(vertical, a, a + house_w, *_span((c0, c0 + inward * house_d)),
                          float(rng.choice(heights)), int(rng.choice(M.FACADES)))
                 lot = house_w + rng.uniform(4, 9)
                 if boundary:  # front boundary with a driveway gap
@@ -309,7 +315,7 @@ class _Town:
                     thick = {1: 0.8, 2: 0.2, 3: 0.3}[boundary]
                     height = {1: rng.uniform(1.1, 1.8), 2: rng.uniform(1.1, 1.6), 3: rng.uniform(0.8, 1.5)}[boundary]
                     mat = {1: M.HEDGE, 2: M.FENCE, 3: M.WALL}[boundary]
-                    self.box(vertical, a - 1.0, a + lot - 4.0, *sorted((b, b + inward * thick)), height, mat)
+                    self.box(vertical, a - 1.0, a + lot - 4.0, *_span((b, b + inward * thick)), height, mat)
                 if rng.random() < 0.6:  # garden tree between houses
                     u, v = self.point(vertical, a + house_w + rng.uniform(1.5, 3.5), edge + inward * rng.uniform(setback, setback + house_d + 4))
                     self.tree(u, v, scale=rng.uniform(0.7, 1.0))
@@ -346,7 +352,7 @@ class _Town:
                    height: float) -> None:
         for vertical, a0, a1, edge, inward in self._sides(u0, u1, v0, v1):
             c0 = edge + inward * 0.5
-            self.box(vertical, a0 + 0.5, a1 - 0.5, *sorted((c0, c0 + inward * thick)), height, mat)
+            self.box(vertical, a0 + 0.5, a1 - 0.5, *_span((c0, c0 + inward * thick)), height, mat)
 
 
 def make_world(grid: StreetGrid, rng: np.random.Generator, cell: float = 0.2) -> World:

@@ -1,0 +1,148 @@
+"""The synthetic dataset: KITTI layout, pykitti readability, determinism, revisits, scan shape."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from safl_bench import synth
+from safl_bench.cli import main as cli_main
+from safl_bench.synth.routes import revisit_kinds
+
+# A tiny, coarse sequence: 2x2 streets, 6 frames, a 64 x 180 sensor.
+TINY = synth.SynthConfig(frames=6, grid_lines=2, azimuth_res_deg=2.0)
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("synth")
+    synth.ensure(root, ["00"], seed=3, progress=False, config=TINY)
+    return root
+
+
+def _digests(root: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*")) if p.is_file()
+    }
+
+
+def test_kitti_layout_and_pykitti(tiny_root: Path) -> None:
+    import pykitti
+
+    seq = tiny_root / "sequences" / "00"
+    assert sorted(p.name for p in (seq / "velodyne").iterdir()) == [f"{i:06d}.bin" for i in range(6)]
+    for line in (seq / "calib.txt").read_text().splitlines():
+        key, values = line.split(":")
+        assert key in {"P0", "P1", "P2", "P3", "Tr"} and len(values.split()) == 12
+    assert len((seq / "times.txt").read_text().split()) == 6
+    pose_lines = (tiny_root / "poses" / "00.txt").read_text().splitlines()
+    assert len(pose_lines) == 6 and all(len(line.split()) == 12 for line in pose_lines)
+
+    data = pykitti.odometry(str(tiny_root), "00")
+    assert len(data) == 6
+    np.testing.assert_allclose(data.poses[0], np.eye(4), atol=1e-12)
+    velo = data.get_velo(2)
+    assert velo.dtype == np.float32 and velo.shape[1] == 4 and len(velo) > 1000
+    assert 0 <= velo[:, 3].min() and velo[:, 3].max() <= 1
+    # camera poses convert back to planar LiDAR poses (x forward, y left, z up)
+    tr = data.calib.T_cam0_velo
+    lidar = np.linalg.inv(tr) @ np.asarray(data.poses) @ tr
+    assert np.all(np.abs(lidar[:, 2, 3]) < 0.05)  # essentially planar
+    step = np.linalg.norm(np.diff(lidar[:, :2, 3], axis=0), axis=1)
+    assert np.all((step > 0.3) & (step < 1.4))  # 3-14 m/s at 10 Hz
+    t = np.array([x.total_seconds() for x in data.timestamps])
+    assert np.all(np.abs(np.diff(t) - 0.1) < 0.01)
+
+
+def test_same_seed_same_bytes(tiny_root: Path, tmp_path: Path) -> None:
+    synth.ensure(tmp_path, ["00"], seed=3, progress=False, config=TINY)
+    assert _digests(tmp_path) == _digests(tiny_root)
+    other = tmp_path / "other"
+    synth.ensure(other, ["00"], seed=4, progress=False, config=TINY)
+    assert _digests(other) != _digests(tmp_path)
+
+
+def test_ensure_redoes_only_missing_or_stale(tmp_path: Path) -> None:
+    synth.ensure(tmp_path, ["01"], seed=0, progress=False, config=TINY)
+    assert synth.is_current(tmp_path, "01", 0, TINY)
+    scan = tmp_path / "sequences" / "01" / "velodyne" / "000003.bin"
+    before = scan.stat().st_mtime_ns
+    synth.ensure(tmp_path, ["01"], seed=0, progress=False, config=TINY)  # nothing to do
+    assert scan.stat().st_mtime_ns == before
+    scan.write_bytes(scan.read_bytes()[:-16])  # a truncated scan, as after a crash
+    assert not synth.is_current(tmp_path, "01", 0, TINY)
+    (tmp_path / "sequences" / "01" / "synth_manifest.json").unlink()  # no manifest: incomplete
+    assert not synth.is_current(tmp_path, "01", 0, TINY)
+    synth.ensure(tmp_path, ["01"], seed=0, progress=False, config=TINY)
+    assert synth.is_current(tmp_path, "01", 0, TINY)
+    assert not synth.is_current(tmp_path, "01", 1, TINY)  # another seed is stale
+
+
+@pytest.mark.parametrize("name", ["00", "09"])
+def test_default_test_routes_revisit(name: str) -> None:
+    """The default test routes come back to places driven before (no ray casting needed)."""
+    scene = synth.make_route(name, seed=synth.DEFAULT_SEED)
+    poses = scene.lidar_poses()
+    assert np.allclose(poses[0], np.eye(4))
+    n = len(poses)
+    assert n == synth.SynthConfig().spec(name).frames
+    xy = poses[:, :2, 3]
+    heading = np.arctan2(poses[:, 1, 0], poses[:, 0, 0])
+    speed = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 10
+    assert 7.0 < speed.mean() < 12.0 and speed.max() < 14.0
+    same, opposite = revisit_kinds(xy, heading, scene.trajectory.times)
+    if name == "00":
+        assert same.sum() > 20 and opposite.sum() > 20
+    else:
+        assert same.sum() + opposite.sum() > 20
+
+
+def test_default_sequence_lengths() -> None:
+    cfg = synth.SynthConfig()
+    assert 1200 <= cfg.spec("00").frames <= 1500
+    assert set(synth.TEST_SEQUENCES).isdisjoint(synth.TRAIN_SEQUENCES)
+
+
+def test_single_scan_looks_like_a_street() -> None:
+    """One full-resolution scan: KITTI-like count, mostly ground, some tall structure."""
+    cfg = synth.SynthConfig(frames=2, grid_lines=2)
+    scene = synth.make_route("02", seed=1, config=cfg)
+    world, lidar = synth.make_scene_world(scene)
+    pts = lidar.scan(world, scene.poses[1], key=7, azimuth_offset=0.0)
+    assert pts.dtype == np.float32 and pts.shape[1] == 4
+    assert 30_000 < len(pts) < 130_000
+    r = np.linalg.norm(pts[:, :3], axis=1)
+    assert r.min() > 2.0 and r.max() <= cfg.max_range_m + 0.5
+    ground = pts[:, 2] < -1.4
+    assert 0.4 < ground.mean() < 0.9  # mostly ground, like KITTI (~0.5)
+    assert (pts[:, 2] > 0.5).mean() > 0.01  # facades, trees, poles
+    assert 3.0 < np.median(r) < 25.0
+    assert 0.0 <= pts[:, 3].min() and pts[:, 3].max() <= 1.0 and 0.1 < np.median(pts[:, 3]) < 0.5
+    elev = np.degrees(np.arcsin(pts[:, 2] / r))
+    assert elev.min() > -26.5 and elev.max() < 3.5
+
+
+def test_cli_bad_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    a_file = tmp_path / "file.txt"
+    a_file.write_text("x")
+    assert cli_main(["data", "synth", "--out", str(a_file), "--sequences", "00"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "not a directory" in err
+    assert cli_main(["data", "synth", "--out", str(tmp_path), "--sequences", "77"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "'77'" in err
+    assert cli_main(["data", "show", "--root", str(tmp_path), "--sequence", "05",
+                     "--out", str(tmp_path / "x.png")]) == 2
+    assert "\n" not in capsys.readouterr().err.strip()
+    assert cli_main(["data", "show", "--sequence", "77"]) == 2
+
+
+def test_cli_show_draws_png(tiny_root: Path, tmp_path: Path) -> None:
+    out = tmp_path / "show.png"
+    assert cli_main(["data", "show", "--root", str(tiny_root), "--sequence", "00",
+                     "--out", str(out), "--scans", "2"]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
