@@ -58,3 +58,33 @@ def boundary_vectors(n: int, start: float) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (cos, sin) of the n sector boundaries start + k 2 pi / n, float64."""
     angles = start + 2.0 * np.pi * np.arange(n) / n
     return np.cos(angles), np.sin(angles)
+
+
+def quadrant_boundaries(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(cos, sin) of the inner sector boundaries of the first quadrant, j * 2 pi / n for
+    j = 1 .. n/4 - 1 (for `sector_index_q`; n must be a multiple of 4)."""
+    if n % 4:
+        raise ValueError(f"quadrant binning needs a sector count divisible by 4, got {n}")
+    angles = 2.0 * np.pi * np.arange(1, n // 4) / n
+    return np.cos(angles), np.sin(angles)
+
+
+@numba.njit(cache=True, inline="always", fastmath=True)
+def sector_index_q(y: float, x: float, n: int, cq: np.ndarray, sq: np.ndarray) -> int:
+    """Exact index k in [0, n) of the sector [k w, (k + 1) w), w = 2 pi / n, holding direction
+    (x, y) (the origin: 0), for n a multiple of 4, without any arctangent: the direction is
+    reflected into the upper half-plane (+n/2) and turned into the first quadrant (+n/4), both
+    exactly, and then compared with the quadrant's boundary directions `cq`, `sq`
+    (`quadrant_boundaries`). Branch-free and faster than `sector_index`."""
+    m = n // 4
+    lower = (y < 0.0) or (y == 0.0 and x < 0.0)
+    x = -x if lower else x
+    y = -y if lower else y
+    quad = x <= 0.0 and y > 0.0
+    t = x
+    x = y if quad else x
+    y = -t if quad else y
+    k = 2 * m * lower + m * quad
+    for j in range(m - 1):
+        k += cq[j] * y - sq[j] * x >= 0.0
+    return k
