@@ -1,32 +1,41 @@
 """The `safl-bench` command line.
 
 Each subcommand lives in its own module in this package and exposes `HELP`,
-`add_arguments(parser)` and `main(args) -> int`. `data` and `list` group further subcommands the
-same way. Errors the user can fix (`SaflError`) print one line and exit with status 2.
+`add_arguments(parser)` and `main(args) -> int`; `COMMANDS` below names them. Only the module of
+the subcommand being run is imported. Errors the user can fix (`SaflError`) print one line and exit with status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import Any
 
 from safl_bench.errors import SaflError
 
-# command name -> module (relative to this package); groups map to a dict of their subcommands.
-COMMANDS: dict[str, str | dict[str, str]] = {
+# command -> (module in this package, one-line help); groups map to a dict of their subcommands.
+# The help lines live here so that `safl-bench --help` and the parser for one subcommand never
+# import the other subcommands' modules (and their numba/matplotlib/torch imports).
+Command = tuple[str, str]
+COMMANDS: dict[str, Command | dict[str, Command]] = {
     "data": {
-        "synth": "data_synth",
-        "show": "data_show",
-        "prepare": "data_prepare",
-        "loops": "data_loops",
+        "synth": ("data_synth", "generate the embedded synthetic default in the KITTI layout"),
+        "show": ("data_show", "draw a route, its revisits, scans and top-view maps to a PNG"),
+        "prepare": ("data_prepare", "build and cache top-view maps (synthetic default or KITTI)"),
+        "loops": ("data_loops", "export ground-truth loop pairs of a KITTI poses file as CSV"),
     },
-    "list": {"tasks": "list_tasks", "methods": "list_methods"},
-    "run": "run",
-    "train": "train",
-    "leaderboard": "leaderboard",
+    "list": {
+        "tasks": ("list_tasks", "list the registered benchmark tasks"),
+        "methods": ("list_methods", "list the registered descriptor methods"),
+    },
+    "run": ("run", "run a method on benchmark tasks and store result records"),
+    "train": ("train", "train a learned method (BiGAN, Stable-AFL) on the training sequences"),
+    "leaderboard": ("leaderboard", "regenerate leaderboard tables and figures from records"),
+    "bench": ("bench", "print the speed benchmarks (maps, matcher, methods)"),
 }
 
 GROUP_HELP = {
@@ -39,10 +48,32 @@ def _load(name: str) -> ModuleType:
     return importlib.import_module(f"safl_bench.cli.{name}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser (imports every subcommand module)."""
+def _selected(argv: Sequence[str]) -> list[str]:
+    """The command words of `argv` (leading non-option tokens), e.g. ['data', 'prepare']."""
+    words: list[str] = []
+    for token in argv:
+        if token.startswith("-"):
+            break
+        words.append(token)
+    return words
+
+
+def _add(sub: Any, name: str, command: Command, selected: bool) -> None:
+    module_name, help_line = command
+    if not selected:  # listed in --help, but its module is not imported
+        sub.add_parser(name, help=help_line)
+        return
+    module = _load(module_name)
+    p = sub.add_parser(name, help=help_line, description=getattr(module, "HELP", help_line))
+    module.add_arguments(p)
+    p.set_defaults(_handler=module.main)
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser; only the subcommand named in `argv` is imported (all if None)."""
     from safl_bench import __version__
 
+    words = _selected(argv) if argv is not None else None
     parser = argparse.ArgumentParser(
         prog="safl-bench",
         description="Benchmark LiDAR loop-closure-detection descriptors (Stable-AFL and others).",
@@ -50,31 +81,30 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"safl-bench {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, target in COMMANDS.items():
+        chosen = words is None or (len(words) > 0 and words[0] == name)
         if isinstance(target, dict):
             group = sub.add_parser(name, help=GROUP_HELP[name], description=GROUP_HELP[name])
             gsub = group.add_subparsers(dest="subcommand", metavar="SUBCOMMAND", required=True)
-            for sub_name, module_name in target.items():
-                module = _load(module_name)
-                p = gsub.add_parser(sub_name, help=module.HELP, description=module.HELP)
-                module.add_arguments(p)
-                p.set_defaults(_handler=module.main)
+            for sub_name, command in target.items():
+                picked = words is None or (chosen and len(words) > 1 and words[1] == sub_name)
+                _add(gsub, sub_name, command, picked)
         else:
-            module = _load(target)
-            p = sub.add_parser(name, help=module.HELP, description=module.HELP)
-            module.add_arguments(p)
-            p.set_defaults(_handler=module.main)
+            _add(sub, name, target, chosen)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `safl-bench` console script."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser(argv).parse_args(argv)
     try:
         return int(args._handler(args) or 0)
     except SaflError as exc:
         print(f"safl-bench: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # e.g. `safl-bench list tasks | head`
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except KeyboardInterrupt:
         print("safl-bench: interrupted; finished work is kept and a rerun resumes", file=sys.stderr)
         return 130
