@@ -1,17 +1,85 @@
-"""`safl-bench run`: not available yet (issue #6)."""
+"""`safl-bench run`: run a method on benchmark tasks, store one record per cell, print a table."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
 
-from safl_bench.errors import SaflError
+from safl_bench.errors import ConfigError
 
-HELP = "(not available yet: issue #6)"
+HELP = (
+    "Run a method on benchmark tasks (default: the paper's twelve conditions on the embedded "
+    "synthetic default's test sequence), generating and caching whatever data is missing. One "
+    "JSON record per (method, task, seed) is written; existing records are reused unless --force."
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No arguments until the command lands."""
+    parser.add_argument("--method", required=True, help="registered method (safl-bench list methods)")
+    parser.add_argument(
+        "--task", action="append", default=[], metavar="ID|SUITE",
+        help="task id or suite (paper, paper-full, revisit, sanity, all); repeatable; default: paper",
+    )
+    parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
+    parser.add_argument("--seed", type=int, help="seed of the query noise (default: the task's own)")
+    parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")
+    parser.add_argument("--force", action="store_true", help="recompute cells whose record exists")
+    parser.add_argument(
+        "--weights", metavar="PATH|shipped|untrained",
+        help="learned methods: a weights file from `safl-bench train`, the shipped ones (default) "
+        "or the untrained networks",
+    )
+    parser.add_argument(
+        "--param", action="append", default=[], metavar="KEY=VALUE",
+        help="method parameter (VALUE parsed as JSON when it can be, else a string); repeatable",
+    )
+    parser.add_argument(
+        "--score", choices=("min", "ratio"), default="min",
+        help="matcher score: the paper's lowest S (min) or OpenSeqSLAM's ratio (default: min)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def parse_params(items: list[str]) -> dict[str, Any]:
+    """KEY=VALUE pairs; VALUE is JSON when it parses (numbers, true/false), else a string."""
+    params: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--param takes KEY=VALUE, got {item!r}")
+        try:
+            params[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            params[key] = raw
+    return params
 
 
 def main(args: argparse.Namespace) -> int:
-    raise SaflError("this command is not available yet (issue #6)")
+    from safl_bench.evaluation import EvaluationConfig
+    from safl_bench.matching import MatcherConfig
+    from safl_bench.method_registry import make_method
+    from safl_bench.records import default_results_dir
+    from safl_bench.runner import RunOptions, resolve_tasks, run_cells, summary_table
+
+    task_ids = resolve_tasks(args.task, kitti=args.kitti_root is not None)
+    method = make_method(args.method, weights=args.weights, **parse_params(args.param))
+    options = RunOptions(
+        results_dir=Path(args.results) if args.results else default_results_dir(),
+        seed=args.seed,
+        force=args.force,
+        kitti_root=args.kitti_root,
+        evaluation=EvaluationConfig(MatcherConfig(score=args.score)),
+        progress=not args.quiet,
+    )
+    outcomes = run_cells(method, task_ids, options)
+    print(f"{method.name}@{method.version} — records in {options.results_dir}")
+    print(summary_table(outcomes))
+    failed = [o for o in outcomes if o.status == "failed"]
+    if failed:
+        print(f"safl-bench: {len(failed)} of {len(outcomes)} tasks failed (see above); "
+              "rerun to retry them", file=sys.stderr)
+        return 2
+    return 0

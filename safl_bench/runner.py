@@ -1,0 +1,228 @@
+"""Running a method over benchmark cells (method × task × seed) into result records.
+
+A cell whose record exists with the same configuration is reused; a corrupt record is reported by
+name and recomputed; a record made with other settings (method parameters or weights, matcher,
+task definition) is recomputed and replaced. Records are written atomically as each cell
+finishes, so an interrupted run resumes where it stopped.
+
+The seed of a cell is the seed of the queries' viewpoint noise (the registered task's seed unless
+`--seed` gives another); the record keeps the registered task's fingerprint so records of several
+seeds of one task sit in one leaderboard cell.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from safl_bench.errors import SaflError
+from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method
+from safl_bench.method import Method
+from safl_bench.records import (
+    CorruptRecordError,
+    MethodInfo,
+    ResultRecord,
+    Timings,
+    load_record,
+    mode_result_from_evaluation,
+    new_record,
+    record_path,
+    task_info,
+    write_record,
+)
+from safl_bench.tasks import registry, spec, suite
+from safl_bench.tasks.task import Task
+from safl_bench.timing import time_describe
+
+#: How timing figures are taken in this process (issue #8 adds parallel runs).
+HOW_RUN = "sequential, one cell at a time in one process"
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Everything about a run that is not the method or the task list."""
+
+    results_dir: Path
+    seed: int | None = None  # None: each task's registered seed
+    force: bool = False
+    kitti_root: str | None = None
+    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+    timing_frames: int = 20
+    timing_repeats: int = 5
+    progress: bool = True
+
+
+@dataclass
+class CellOutcome:
+    """What happened to one cell."""
+
+    task_id: str
+    seed: int
+    status: str  # "computed", "reused" or "failed"
+    path: Path
+    record: ResultRecord | None = None
+    message: str = ""
+
+
+def resolve_tasks(items: Sequence[str], *, kitti: bool = False) -> list[str]:
+    """Task ids from ids and suite names ('paper', 'revisit', 'all', ...), in order, no repeats.
+
+    Suites pick the KITTI tasks when `kitti` is true, else the embedded default's. No items means
+    the 'paper' suite.
+    """
+    source = "kitti" if kitti else "synth"
+    out: list[str] = []
+    for item in items or ["paper"]:
+        ids = [spec(item).id] if "/" in item or item in registry else suite(item, source)
+        out.extend(i for i in ids if i not in out)
+    return out
+
+
+def method_info(method: Method) -> MethodInfo:
+    """The method part of a record: name, version and the full configuration (weights too)."""
+    config = method.config()
+    params = {k: v for k, v in config.items() if k not in ("name", "version")}
+    return MethodInfo(name=method.name, version=str(method.version), params=params)
+
+
+def _same_run(old: ResultRecord, method: MethodInfo, task_fp: str, matcher: dict[str, Any]) -> str:
+    """Why an existing record does not hold this run ('' when it does)."""
+    if old.method.params != method.params:
+        return "method settings differ"
+    if old.task.spec_fingerprint != task_fp:
+        return "task definition differs"
+    if old.matcher != matcher:
+        return "matcher settings differ"
+    return ""
+
+
+def run_cell(
+    method: Method,
+    task_id: str,
+    options: RunOptions,
+    *,
+    log: Callable[[str], None] = print,
+) -> CellOutcome:
+    """Evaluate `method` on one task and seed; write (or reuse) its record."""
+    registered = spec(task_id)
+    seed = registered.seed if options.seed is None else int(options.seed)
+    info = method_info(method)
+    path = record_path(options.results_dir, info.name, info.version, registered.id, seed)
+    matcher = options.evaluation.to_dict()
+    if path.is_file() and not options.force:
+        try:
+            old = load_record(path)
+        except CorruptRecordError as exc:
+            log(f"warning: {exc}; recomputing it")
+        else:
+            why = _same_run(old, info, registered.fingerprint, matcher)
+            if not why:
+                return CellOutcome(registered.id, seed, "reused", path, old)
+            log(f"note: {path} was made with other settings ({why}); recomputing it")
+
+    run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
+    task = Task.from_spec(run_spec, kitti_root=options.kitti_root, progress=options.progress)
+    kind = method.input_kind
+    task.prepare([kind])
+    database, queries = task.database(kind), task.queries(kind)
+    evaluation = evaluate_method(
+        method,
+        queries,
+        database,
+        task.truth,
+        config=options.evaluation,
+        revisit=registered.protocol == "revisit",
+    )
+    batch1 = time_describe(
+        method, queries, batch_size=1, frames=options.timing_frames,
+        repeats=options.timing_repeats, warmup=1,
+    )
+    timings = Timings(
+        describe_ms_per_frame=batch1.per_item_ms,
+        describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
+        matcher_s=evaluation.matcher_s,
+        peak_memory_mb=batch1.peak_rss_mb,
+        repeats=options.timing_repeats,
+        how_run=HOW_RUN,
+    )
+    data = task.info()
+    record = new_record(
+        method=info,
+        task=task_info(
+            registered,
+            task.source.label if task.source is not None else registered.source,
+            data_fingerprint=data.get("data_fingerprint"),
+            n_queries=data["n_queries"],
+            n_database=data["n_database"],
+        ),
+        seed=seed,
+        matcher=matcher,
+        results={m: mode_result_from_evaluation(evaluation.metrics[m]) for m in MODES},
+        timings=timings,
+    )
+    written = write_record(options.results_dir, record)
+    return CellOutcome(registered.id, seed, "computed", written, record)
+
+
+def run_cells(
+    method: Method,
+    task_ids: Sequence[str],
+    options: RunOptions,
+    *,
+    log: Callable[[str], None] | None = None,
+) -> list[CellOutcome]:
+    """Run every task in turn; a cell that fails on bad data is reported and the others go on."""
+    from tqdm import tqdm
+
+    def say(message: str) -> None:
+        if log is not None:
+            log(message)
+        else:
+            tqdm.write(message, file=sys.stderr)
+
+    outcomes: list[CellOutcome] = []
+    bar = tqdm(task_ids, desc=f"{method.name}", unit="task", disable=not options.progress)
+    for task_id in bar:
+        bar.set_postfix_str(task_id)
+        try:
+            outcomes.append(run_cell(method, task_id, options, log=say))
+        except SaflError as exc:
+            seed = spec(task_id).seed if options.seed is None else options.seed
+            path = record_path(options.results_dir, method.name, method.version, task_id, seed)
+            say(f"error: {task_id}: {exc}")
+            outcomes.append(CellOutcome(task_id, seed, "failed", path, message=str(exc)))
+    return outcomes
+
+
+def _pct(value: float | None) -> str:
+    return "—" if value is None else f"{100 * value:.1f}"
+
+
+def summary_table(outcomes: Sequence[CellOutcome]) -> str:
+    """A plain-text table of the headline figures per task (sequence matching unless noted)."""
+    header = ("task", "R@100%P", "AUC", "F1max", "R@100%P 1-frame", "ms/frame", "record")
+    rows: list[tuple[str, ...]] = []
+    for o in outcomes:
+        if o.record is None:
+            rows.append((o.task_id, "—", "—", "—", "—", "—", f"failed: {o.message}"))
+            continue
+        seq = o.record.results["sequence"].metrics
+        single = o.record.results["single_frame"].metrics
+        rows.append((
+            o.task_id,
+            _pct(seq.recall_at_100_precision),
+            "—" if seq.auc is None else f"{seq.auc:.3f}",
+            f"{seq.f1_max:.3f}",
+            _pct(single.recall_at_100_precision),
+            f"{o.record.timings.describe_ms_per_frame:.2f}",
+            o.status,
+        ))
+    widths = [max(len(r[i]) for r in (header, *rows)) for i in range(len(header))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+             for r in (header, *rows)]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)

@@ -1,0 +1,123 @@
+"""`safl-bench run` and the runner: records per cell, reuse, resume, recompute on change."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from safl_bench import runner, tasks
+from safl_bench.cli import main
+from safl_bench.mapconfig import MapConfig
+from safl_bench.method_registry import make_method
+from safl_bench.records import load_record
+
+TASKS = ("Test/TinyRun-T1R1-v0", "Test/TinyRun-T5R1-v0")
+
+
+@pytest.fixture
+def tiny_tasks(kitti_root: Path, safl_home: Path) -> Iterator[tuple[str, ...]]:
+    for task_id in TASKS:
+        condition = task_id.split("-")[1]
+        tasks.register(task_id, source="kitti", sequence="00", condition=condition, step=1,
+                       map_config=MapConfig(size=32))
+    yield TASKS
+    for task_id in TASKS:
+        tasks.unregister(task_id)
+
+
+def options(kitti_root: Path, results: Path, **kw: object) -> runner.RunOptions:
+    return runner.RunOptions(results_dir=results, kitti_root=str(kitti_root), progress=False,
+                             timing_frames=3, timing_repeats=2, **kw)  # type: ignore[arg-type]
+
+
+def test_cell_writes_a_complete_record_then_reuses_it(tiny_tasks, kitti_root, tmp_path):
+    sad = make_method("sad")
+    first = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path))
+    assert first.status == "computed" and first.path.is_file()
+    record = load_record(first.path)
+    assert record.task.id == tiny_tasks[0] and record.task.condition == "T1R1"
+    assert set(record.results) == {"sequence", "single_frame"}
+    assert record.results["sequence"].metrics.n_queries == 12
+    assert record.matcher["sequence"]["ds"] == 10 and record.matcher["single_frame"]["ds"] == 0
+    assert record.timings.describe_ms_per_frame > 0
+    assert record.method.params["params"] == sad.get_params()
+    again = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path))
+    assert again.status == "reused"
+    assert again.record is not None and again.record.created == record.created
+
+
+def test_corrupt_or_stale_records_are_recomputed(tiny_tasks, kitti_root, tmp_path):
+    sad = make_method("sad")
+    path = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path)).path
+    path.write_text(path.read_text()[:100])
+    said: list[str] = []
+    out = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path), log=said.append)
+    assert out.status == "computed" and str(path) in said[0]
+    load_record(path)  # whole again
+    other = make_method("sad", **{next(iter(sad.get_params())): 4}) if sad.get_params() else None
+    if other is not None:
+        said.clear()
+        out = runner.run_cell(other, tiny_tasks[0], options(kitti_root, tmp_path), log=said.append)
+        assert out.status == "computed" and "method settings differ" in said[0]
+    forced = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path, force=True))
+    assert forced.status == "computed"
+
+
+def test_interrupted_run_resumes(tiny_tasks, kitti_root, tmp_path, monkeypatch):
+    sad = make_method("sad")
+    real = runner.evaluate_method
+    calls = {"n": 0}
+
+    def interrupt_second(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "evaluate_method", interrupt_second)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_cells(sad, tiny_tasks, options(kitti_root, tmp_path))
+    done = list(tmp_path.rglob("*.json"))
+    assert len(done) == 1 and not list(tmp_path.rglob("*.tmp*"))
+    monkeypatch.setattr(runner, "evaluate_method", real)
+    outcomes = runner.run_cells(sad, tiny_tasks, options(kitti_root, tmp_path))
+    assert [o.status for o in outcomes] == ["reused", "computed"]
+
+
+def test_seed_changes_queries_but_keeps_the_task_fingerprint(tiny_tasks, kitti_root, tmp_path):
+    sad = make_method("sad")
+    a = runner.run_cell(sad, tiny_tasks[1], options(kitti_root, tmp_path))
+    b = runner.run_cell(sad, tiny_tasks[1], options(kitti_root, tmp_path, seed=7))
+    assert a.path != b.path and b.record is not None and a.record is not None
+    assert b.record.seed == 7 and a.record.seed == 0
+    assert a.record.task.spec_fingerprint == b.record.task.spec_fingerprint
+
+
+def test_cli_run_prints_the_table(tiny_tasks, kitti_root, tmp_path, capsys):
+    rc = main(["run", "--method", "sad", "--task", tiny_tasks[0], "--kitti-root", str(kitti_root),
+               "--results", str(tmp_path), "--quiet"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "R@100%P" in out and tiny_tasks[0] in out and "computed" in out
+    record = json.loads(next(tmp_path.rglob("seed-0.json")).read_text())
+    assert record["method"]["name"] == "sad"
+
+
+def test_cli_run_bad_input_is_one_line(tiny_tasks, tmp_path, capsys):
+    assert main(["run", "--method", "nope", "--results", str(tmp_path)]) == 2
+    assert main(["run", "--method", "sad", "--task", "SAFL/Synth00-T3R1-v0"]) == 2
+    assert main(["run", "--method", "sad", "--param", "oops"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and all(line.startswith("safl-bench: error:") for line in err)
+
+
+def test_resolve_tasks_expands_suites():
+    paper = runner.resolve_tasks([])
+    assert len(paper) == 12 and all(t.startswith("SAFL/Synth00-") for t in paper)
+    kitti = runner.resolve_tasks(["paper"], kitti=True)
+    assert all(t.startswith("SAFL/KITTI00-") for t in kitti)
+    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v0", "paper"])
+    assert mixed[0] == "SAFL/Synth00-T1R1-v0" and len(mixed) == 12
