@@ -320,3 +320,35 @@ def train(
     for net in method.nets.values():
         net.eval()
     return log
+
+
+def save_reconstructions(method: AdversarialMethod, maps: Views, path: str | Path, n: int = 8) -> Path:
+    """A PNG of `n` maps (top row) and their reconstructions De(En(x)) (bottom row)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from safl_bench.atomic import atomic_path
+
+    arr = as_topview(maps)
+    if len(arr) == 0:
+        raise DataError("no maps to reconstruct")
+    idx = np.linspace(0, len(arr) - 1, min(n, len(arr))).round().astype(int)
+    originals = method.to_input(arr[idx])[:, 0].numpy() * 0.5 + 0.5
+    recs = method.reconstruct(arr[idx])
+    fig = Figure(figsize=(1.6 * len(idx), 3.4))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, len(idx), squeeze=False)
+    for col in range(len(idx)):
+        for row, (img, label) in enumerate(((originals[col], "x"), (recs[col], "De(En(x))"))):
+            ax = axes[row][col]
+            ax.imshow(img, cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if col == 0:
+                ax.set_ylabel(label)
+    fig.suptitle(f"{method.name}: maps (top) and reconstructions (bottom)")
+    fig.tight_layout()
+    out = Path(path)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, format="png", dpi=100)
+    return out

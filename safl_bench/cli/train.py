@@ -1,17 +1,152 @@
-"""`safl-bench train`: not available yet (issue #5)."""
+"""`safl-bench train`: train a learned descriptor (BiGAN or Stable-AFL) on the training sequences.
+
+Data: the clean top-view maps of the training sequences (KITTI 01-08 with --kitti-root, else
+the synthetic default's training sequences), every `--step`-th frame, from the map cache.
+
+Writes into --out (default <home>/weights/<method>-<source>-seed<seed>):
+  last.safetensors     checkpoint after the last completed epoch (all networks + optimizers)
+  log.jsonl            per-epoch losses (and seconds); the data of the training-stability figure
+  model.safetensors    the trained encoder and decoder (+ constructor parameters)
+  <method>.safetensors the encoder alone: what `describe` needs, the file to ship (<= 25 MB)
+  reconstructions.png  a few training maps and their reconstructions De(En(x))
+  train.json           the command, parameters, data and environment of the run
+An interrupted run continues from last.safetensors with --resume.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
 
-from safl_bench.errors import SaflError
+import numpy as np
 
-HELP = "(not available yet: issue #5)"
+from safl_bench.errors import ConfigError
+
+HELP = "train a learned descriptor (bigan, stable_afl) on the training sequences"
+
+KITTI_TRAIN_SEQUENCES = ("01", "02", "03", "04", "05", "06", "07", "08")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No arguments until the command lands."""
+    """--method, data, training and output options."""
+    parser.add_argument("--method", required=True, help="a trainable method, e.g. stable_afl or bigan")
+    parser.add_argument("--kitti-root", help="train on KITTI odometry 01-08 at this root (default: the synthetic data)")
+    parser.add_argument("--synth-seed", type=int, default=None, help="seed of the synthetic data (default 0)")
+    parser.add_argument("--sequences", help="comma-separated training sequences (default: KITTI 01-08 or the synthetic training ones)")
+    parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1: all)")
+    parser.add_argument("--epochs", type=int, help="number of epochs (default: the method's, 20)")
+    parser.add_argument("--batch-size", type=int, help="batch size (default: the method's, 64)")
+    parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a constructor parameter (value parsed as JSON, else a string); repeatable")
+    parser.add_argument("--out", help="output directory")
+    parser.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def parse_sets(items: list[str]) -> dict[str, Any]:
+    """KEY=VALUE pairs -> dict, values parsed as JSON when they are JSON."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--set expects KEY=VALUE, got {item!r}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def load_training_maps(source: Any, sequences: list[str], step: int, progress: bool) -> tuple[np.ndarray, dict[str, int]]:
+    """Clean top-view maps of every `step`-th frame of `sequences`, concatenated."""
+    from safl_bench import mapcache
+    from safl_bench.mapconfig import MapConfig
+    from safl_bench.noise import CLEAN
+
+    parts, counts = [], {}
+    for name in sequences:
+        frames = np.arange(0, len(source.sequence(name)), step, dtype=np.int64)
+        views = mapcache.load_views(source, name, MapConfig(), frames=frames, condition=CLEAN, seed=0,
+                                    kind="topview", progress=progress)
+        parts.append(np.asarray(views))
+        counts[name] = len(frames)
+    return np.concatenate(parts), counts
 
 
 def main(args: argparse.Namespace) -> int:
-    raise SaflError("this command is not available yet (issue #5)")
+    """Train, then write the weights, the encoder-only file, reconstructions and train.json."""
+    import torch
+
+    from safl_bench import paths, provenance
+    from safl_bench.datasource import kitti_source, synth_source
+    from safl_bench.method_registry import method_class
+    from safl_bench.training import AdversarialMethod, CHECKPOINT, save_reconstructions
+
+    cls = method_class(args.method)
+    if not (cls.trainable and issubclass(cls, AdversarialMethod)):
+        raise ConfigError(f"method {args.method!r} has nothing to train")
+    if args.step < 1:
+        raise ConfigError(f"--step must be >= 1, got {args.step}")
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ConfigError(f"--threads must be >= 1, got {args.threads}")
+        torch.set_num_threads(args.threads)
+    progress = not args.no_progress
+
+    params = parse_sets(args.set)
+    for key, value in (("epochs", args.epochs), ("batch_size", args.batch_size), ("seed", args.seed)):
+        if value is not None:
+            params[key] = value
+    unknown = sorted(set(params) - set(cls._param_names()))
+    if unknown:
+        raise ConfigError(f"method {cls.name!r} has no parameter(s) {unknown}; valid: {cls._param_names()}")
+    method = cls(**params)
+
+    if args.kitti_root is not None:
+        if args.synth_seed is not None:
+            raise ConfigError("--synth-seed applies to the synthetic data only, not with --kitti-root")
+        sequences = args.sequences.split(",") if args.sequences else list(KITTI_TRAIN_SEQUENCES)
+        source = kitti_source(args.kitti_root)
+        tag = "kitti"
+    else:
+        from safl_bench import synth
+
+        seed = synth.DEFAULT_SEED if args.synth_seed is None else args.synth_seed
+        sequences = args.sequences.split(",") if args.sequences else list(synth.TRAIN_SEQUENCES)
+        source = synth_source(seed, sequences, progress=progress)
+        tag = f"synth{seed}"
+
+    out = Path(args.out) if args.out else paths.home() / "weights" / f"{cls.name}-{tag}-seed{method.seed}"
+    if (out / CHECKPOINT).exists() and not args.resume:
+        raise ConfigError(f"{out} already holds a training run; pass --resume to continue it or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+
+    maps, counts = load_training_maps(source, sequences, args.step, progress)
+    print(f"training {cls.name} on {len(maps)} maps of {source.label} {', '.join(sequences)} -> {out}", file=sys.stderr)
+    method.fit(maps, checkpoint_dir=out, progress=progress)
+
+    method.save(out / "model.safetensors", parts=("encoder", "decoder"))
+    method.save(out / f"{cls.name}.safetensors", parts=("encoder",))
+    save_reconstructions(method, maps, out / "reconstructions.png")
+
+    from safl_bench.atomic import atomic_write_json
+    from safl_bench.training import data_fingerprint
+
+    env = provenance.collect_environment()
+    atomic_write_json(out / "train.json", {
+        "command": "safl-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+        "method": method.config(),
+        "data": {"source": source.label, "kind": source.kind, "sequences": counts, "step": args.step,
+                 "maps": len(maps), "fingerprint": data_fingerprint(maps)},
+        "environment": {"python": env.python, "libraries": env.libraries, "cpu": env.cpu_model,
+                        "torch_threads": env.torch_threads, "git": env.git_revision},
+    })
+    print(f"wrote {out / (cls.name + '.safetensors')} (encoder, ship this), {out / 'model.safetensors'}, "
+          f"{out / 'log.jsonl'}, {out / 'reconstructions.png'}")
+    return 0
