@@ -86,7 +86,7 @@ def main(args: argparse.Namespace) -> int:
     from safl_bench import paths, provenance
     from safl_bench.datasource import kitti_source, synth_source
     from safl_bench.method_registry import method_class
-    from safl_bench.training import AdversarialMethod, CHECKPOINT, save_reconstructions
+    from safl_bench.training import CHECKPOINT, AdversarialMethod, save_reconstructions
 
     cls = method_class(args.method)
     if not (cls.trainable and issubclass(cls, AdversarialMethod)):
