@@ -96,3 +96,11 @@ def test_method_plugin(scenes: list[np.ndarray]) -> None:
 def test_check_method() -> None:
     check = pytest.importorskip("safl_bench.check")
     check.check_method(M2DP())
+
+
+def test_signature_is_the_top_singular_pair(scenes: list[np.ndarray]) -> None:
+    pts = scenes[4]
+    u, _, vt = np.linalg.svd(signature_matrix(subsample(pts, 8192)))
+    ref = np.concatenate([u[:, 0], vt[0]])
+    ref *= np.sign(ref.sum())
+    np.testing.assert_allclose(m2dp(pts, max_points=8192), ref, atol=1e-6)
