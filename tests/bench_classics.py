@@ -13,7 +13,6 @@ import time
 import numpy as np
 import pytest
 from classic_scenes import rotate_z, scene
-
 from threadpoolctl import threadpool_limits
 
 from baselines.m2dp import m2dp
