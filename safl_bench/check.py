@@ -184,7 +184,7 @@ def check_method(
         _fail("distance-nonnegative", f"{label}: distance matrix has negative entries (min {dist.min():g})")
     own = dist[np.arange(len(q)), np.arange(len(q))]
     dscale = float(dist.max()) or 1.0
-    if (own > dist.min(axis=1) + 1e-6 * dscale).any():
+    if (own > dist.min(axis=1) + 1e-5 * dscale).any():
         _fail("self-distance-minimal", f"{label}: a view is not closest to itself (distance to itself "
               f"{own.max():g} exceeds the row minimum)")
     return method

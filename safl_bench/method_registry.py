@@ -122,6 +122,12 @@ def register_method(cls: type[Method]) -> type[Method]:
     return cls
 
 
+def unregister_method(name: str) -> None:
+    """Remove a registered method (for tests and interactive use); RegistryError if unknown."""
+    if _registry.pop(name, None) is None and _broken.pop(name, None) is None:
+        raise RegistryError(f"no method {name!r} is registered")
+
+
 def _load_entry_points() -> None:
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         dist = f"{ep.dist.name} {ep.dist.version}" if ep.dist is not None else None
