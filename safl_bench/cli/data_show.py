@@ -108,7 +108,7 @@ def main(args: argparse.Namespace) -> int:
     for k, i in enumerate(frames):
         route_ax.annotate(f"#{i}", xy[i], fontsize=8, xytext=(4, 4), textcoords="offset points")
         pts = seq.scan(int(i))
-        draw_scan(fig.add_subplot(grid[0, 2 + k]), pts, f"scan {i}: {len(pts)} points (z colour)")
+        draw_scan(fig.add_subplot(grid[0, 2 + k]), pts, f"scan {i}: {len(pts)} points (colour = z, forward = +x)")
         ax = fig.add_subplot(grid[1, 2 + k])
         if maps is not None:
             ax.imshow(maps[k], cmap="gray", vmin=0, vmax=1)

@@ -43,16 +43,17 @@ def _normal(key: np.uint64, ray: int, draw: int) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fmat, coarse, block,
+def cast_scan(dirs, gain, rot, origin, cell, cells, gmat, tmat, fmat, coarse, block_shift,
               refl_mean, refl_sd, pass_prob, max_range, noise_sd, dropout, key, out):
     """Cast rays `dirs` (n,3, sensor frame, unit) from a sensor at `rot`, `origin` (world).
 
     Writes returns as rows (x, y, z, reflectance) in the sensor frame into `out` (n,4) and
-    returns how many were written. `coarse` holds, per `block` x `block` cells, the highest
-    surface in them: a ray that stays above it crosses the whole block in one step.
+    returns how many were written. `coarse` holds, per block of 2**block_shift cells square,
+    the highest surface in it: a ray that stays above it crosses the whole block in one step.
     """
+    block = 1 << block_shift
     bsize = block * cell
-    ny, nx = ground.shape
+    ny, nx = cells.shape[0], cells.shape[1]
     ox, oy, oz = origin[0], origin[1], origin[2]
     count = 0
     inf = np.inf
@@ -86,7 +87,7 @@ def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fm
             if cx < 0 or cx >= nx or cy < 0 or cy >= ny:
                 break
             # skip a whole block of cells when the ray stays above everything in it
-            bx, by = cx // block, cy // block
+            bx, by = cx >> block_shift, cy >> block_shift  # cx, cy >= 0 here
             cmax = coarse[by, bx]
             if oz + t_in * dz > cmax:
                 tbx = (((bx + 1) * bsize - ox) / dx) if dx > 0 else ((bx * bsize - ox) / dx if dx < 0 else inf)
@@ -113,14 +114,14 @@ def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fm
             z_in = oz + t_in * dz
             z_out = oz + t_out * dz
             face = abs(dx) if axis == 0 else (abs(dy) if axis == 1 else hxy)
-            gz = ground[cy, cx]
+            gz = cells[cy, cx, 0]
             # ground (a kerb face when entering below its height)
             if z_in <= gz and t_in > 0.0:
                 hit_t, hit_m, hit_cos = t_in, gmat[cy, cx], face
             elif z_out <= gz and dz < 0.0:
                 hit_t, hit_m, hit_cos = (gz - oz) / dz, gmat[cy, cx], -dz
             # solid column standing on the ground
-            tp = top[cy, cx]
+            tp = cells[cy, cx, 1]
             if tp > gz:
                 t, c = inf, 0.0
                 if z_in <= tp and t_in > 0.5:
@@ -133,7 +134,7 @@ def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fm
                     if pass_prob[m] <= 0.0 or _uniform(key, k, draw) >= pass_prob[m]:
                         hit_t, hit_m, hit_cos = t, m, c
             # floating interval (crowns, plates)
-            fl, fh = lo[cy, cx], hi[cy, cx]
+            fl, fh = cells[cy, cx, 2], cells[cy, cx, 3]
             if fh > fl:
                 t, c = inf, 0.0
                 if fl <= z_in <= fh and t_in > 0.5:
@@ -161,7 +162,7 @@ def cast_scan(dirs, gain, rot, origin, cell, ground, gmat, top, tmat, lo, hi, fm
                 axis = 1
         if hit_t >= max_range or hit_t == inf:
             continue
-        refl = gain[k] * refl_mean[hit_m] * (0.6 + 0.4 * hit_cos) + refl_sd[hit_m] * _normal(key, k, 0)
+        refl = gain[k] * refl_mean[hit_m] * (0.7 + 0.3 * hit_cos) + refl_sd[hit_m] * _normal(key, k, 0)
         refl = min(max(refl, 0.0), 1.0)
         r = hit_t + noise_sd * _normal(key, k, 2)
         p_drop = dropout + 0.35 * (r / max_range) ** 2 + (0.25 if refl < 0.04 else 0.0)
@@ -201,8 +202,8 @@ class Lidar:
         out = np.empty((len(dirs), 4), dtype=np.float32)
         n = cast_scan(
             dirs, self.gain, np.ascontiguousarray(pose[:3, :3]), np.ascontiguousarray(pose[:3, 3]),
-            float(world.cell), world.ground, world.ground_mat, world.top, world.top_mat,
-            world.lo, world.hi, world.float_mat, world.coarse, world.block, M.REFL_MEAN, M.REFL_SD, M.PASS,
+            float(world.cell), world.cells, world.ground_mat, world.top_mat, world.float_mat,
+            world.coarse, world.block_shift, M.REFL_MEAN, M.REFL_SD, M.PASS,
             float(cfg.max_range_m), float(cfg.range_noise_m), float(cfg.dropout),
             np.uint64(key), out,
         )

@@ -40,16 +40,19 @@ class World:
     grid: StreetGrid
     #: per block x block cells, the highest surface in them (lets rays skip empty space)
     coarse: np.ndarray = dataclasses.field(init=False)
-    block: int = 8
+    #: (ny, nx, 4) float32 ground, top, lo, hi side by side: one cache line per cell for rays
+    cells: np.ndarray = dataclasses.field(init=False)
+    block_shift: int = 3  # blocks of 8 x 8 cells
 
     def __post_init__(self) -> None:
         occ = np.maximum(self.ground, np.where(self.top > self.ground, self.top, -np.inf))
         occ = np.maximum(occ, np.where(self.hi > self.lo, self.hi, -np.inf)).astype(np.float32)
-        b = self.block
+        b = 1 << self.block_shift
         ny, nx = occ.shape
         pad = np.full((-(-ny // b) * b, -(-nx // b) * b), -np.inf, dtype=np.float32)
         pad[:ny, :nx] = occ
         self.coarse = pad.reshape(pad.shape[0] // b, b, pad.shape[1] // b, b).max(axis=(1, 3))
+        self.cells = np.stack([self.ground, self.top, self.lo, self.hi], axis=-1)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -162,6 +165,11 @@ class _Town:
         self.p.disc_solid(u, v, rng.uniform(0.12, 0.25), zc, M.TRUNK)
         self.p.crown(u, v, radius, zc, half_h)
 
+    def shrub(self, u: float, v: float) -> None:
+        """A porous bush standing on the ground."""
+        rng = self.rng
+        self.p.disc_solid(u, v, rng.uniform(0.5, 1.4), rng.uniform(0.5, 1.7), M.HEDGE)
+
     def car(self, vertical: bool, a: float, c: float) -> None:
         """A parked car centred at (along a, across c), oriented along the street."""
         rng = self.rng
@@ -240,10 +248,10 @@ class _Town:
                     for a in np.arange(a0 + rng.uniform(3, 8), a1 - 3, step):
                         u, v = self.point(vertical, float(a + rng.normal(0, 0.4)), walk_mid)
                         self.tree(u, v, scale=0.85)
-                if a1 - a0 > 25 and rng.random() < 0.7:  # parked cars along the kerb
+                if a1 - a0 > 25 and rng.random() < 0.8:  # parked cars along the kerb
                     a = a0 + rng.uniform(6, 10)
                     while a < a1 - 10:
-                        if rng.random() < 0.72:
+                        if rng.random() < 0.8:
                             self.car(vertical, a + 2.4, kerb - side * 1.1)
                             a += rng.uniform(5.4, 7.5)
                         else:
@@ -316,6 +324,9 @@ class _Town:
                     height = {1: rng.uniform(1.1, 1.8), 2: rng.uniform(1.1, 1.6), 3: rng.uniform(0.8, 1.5)}[boundary]
                     mat = {1: M.HEDGE, 2: M.FENCE, 3: M.WALL}[boundary]
                     self.box(vertical, a - 1.0, a + lot - 4.0, *_span((b, b + inward * thick)), height, mat)
+                for _ in range(int(rng.integers(0, 3))):  # bushes in the front garden
+                    u, v = self.point(vertical, a + rng.uniform(0, house_w), edge + inward * rng.uniform(1.2, max(setback - 1.0, 1.3)))
+                    self.shrub(u, v)
                 if rng.random() < 0.6:  # garden tree between houses
                     u, v = self.point(vertical, a + house_w + rng.uniform(1.5, 3.5), edge + inward * rng.uniform(setback, setback + house_d + 4))
                     self.tree(u, v, scale=rng.uniform(0.7, 1.0))
@@ -328,6 +339,8 @@ class _Town:
             for v in np.arange(v0 + 4, v1 - 3, step):
                 if rng.random() < 0.62:
                     self.tree(u + rng.uniform(-2.5, 2.5), v + rng.uniform(-2.5, 2.5))
+                if rng.random() < 0.5:
+                    self.shrub(u + step / 2 + rng.uniform(-2, 2), v + step / 2 + rng.uniform(-2, 2))
         if rng.random() < 0.5:
             self._perimeter(u0, u1, v0, v1, M.FENCE, 0.2, rng.uniform(1.0, 1.5))
 
@@ -337,6 +350,8 @@ class _Town:
             self._perimeter(u0, u1, v0, v1, M.FENCE, 0.2, rng.uniform(1.0, 1.6))
         for _ in range(int(rng.integers(0, 5))):
             self.tree(rng.uniform(u0 + 3, u1 - 3), rng.uniform(v0 + 3, v1 - 3))
+        for _ in range(int(rng.integers(3, 15))):
+            self.shrub(rng.uniform(u0 + 2, u1 - 2), rng.uniform(v0 + 2, v1 - 2))
 
     def block_parking(self, u0: float, u1: float, v0: float, v1: float) -> None:
         rng = self.rng
