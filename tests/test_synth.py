@@ -66,6 +66,15 @@ def test_same_seed_same_bytes(tiny_root: Path, tmp_path: Path) -> None:
     assert _digests(other) != _digests(tmp_path)
 
 
+def test_threads_do_not_change_bytes(tmp_path: Path) -> None:
+    """Two sequences generated at once (two threads) equal the same ones made one by one."""
+    together, apart = tmp_path / "together", tmp_path / "apart"
+    synth.ensure(together, ["00", "01"], seed=5, progress=False, config=TINY)
+    for name in ("01", "00"):
+        synth.ensure(apart, [name], seed=5, progress=False, config=TINY)
+    assert _digests(together) == _digests(apart)
+
+
 def test_ensure_redoes_only_missing_or_stale(tmp_path: Path) -> None:
     synth.ensure(tmp_path, ["01"], seed=0, progress=False, config=TINY)
     assert synth.is_current(tmp_path, "01", 0, TINY)

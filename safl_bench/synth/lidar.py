@@ -176,6 +176,22 @@ def cast_scan(dirs, gain, rot, origin, cell, cells, gmat, tmat, fmat, coarse, bl
     return count
 
 
+#: The roof of the ego vehicle under the sensor (sensor frame, metres): rays that reach this
+#: rectangle of the plane z = EGO_ROOF_Z are blocked, which leaves KITTI's blind spot around the
+#: car (longer behind it than in front).
+EGO_ROOF_Z = -0.35
+EGO_ROOF_X = (-1.7, 0.6)
+EGO_ROOF_Y = (-0.85, 0.85)
+
+
+def ego_blocked(dirs: np.ndarray) -> np.ndarray:
+    """Which sensor-frame rays hit the ego vehicle's own roof."""
+    down = dirs[:, 2] < 0
+    t = np.where(down, EGO_ROOF_Z / np.where(down, dirs[:, 2], -1.0), 0.0)
+    x, y = t * dirs[:, 0], t * dirs[:, 1]
+    return down & (x > EGO_ROOF_X[0]) & (x < EGO_ROOF_X[1]) & (y > EGO_ROOF_Y[0]) & (y < EGO_ROOF_Y[1])
+
+
 class Lidar:
     """The sensor: beam geometry, per-beam gain, and one scan per pose."""
 
@@ -199,9 +215,11 @@ class Lidar:
         """One scan (N,4) float32 in the sensor frame from world pose `pose` (4x4)."""
         cfg = self.config
         dirs = self.directions(azimuth_offset)
+        free = ~ego_blocked(dirs)
+        dirs = np.ascontiguousarray(dirs[free])
         out = np.empty((len(dirs), 4), dtype=np.float32)
         n = cast_scan(
-            dirs, self.gain, np.ascontiguousarray(pose[:3, :3]), np.ascontiguousarray(pose[:3, 3]),
+            dirs, self.gain[free], np.ascontiguousarray(pose[:3, :3]), np.ascontiguousarray(pose[:3, 3]),
             float(world.cell), world.cells, world.ground_mat, world.top_mat, world.float_mat,
             world.coarse, world.block_shift, M.REFL_MEAN, M.REFL_SD, M.PASS,
             float(cfg.max_range_m), float(cfg.range_noise_m), float(cfg.dropout),
