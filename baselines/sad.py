@@ -37,15 +37,15 @@ def patch_normalise(images: np.ndarray, patch: int, mode: str = "range") -> np.n
     """Normalise every non-overlapping patch x patch block of (N, S, S) images (vectorised)."""
     n, s, _ = images.shape
     k = s // patch
-    blocks = images.reshape(n, k, patch, k, patch).astype(np.float32)
+    blocks = images.reshape(n, k, patch, k, patch).astype(np.float32, copy=False)
     mean = blocks.mean(axis=(2, 4), keepdims=True)
     if mode == "range":
         scale = blocks.max(axis=(2, 4), keepdims=True) - blocks.min(axis=(2, 4), keepdims=True)
     else:
         scale = blocks.std(axis=(2, 4), keepdims=True)
-    safe = np.where(scale > 1e-6, scale, np.float32(1.0))
-    out = np.where(scale > 1e-6, (blocks - mean) / safe, np.float32(0.0))
-    return out.reshape(n, s, s).astype(np.float32, copy=False)
+    inv = np.zeros_like(scale)
+    np.divide(np.float32(1.0), scale, out=inv, where=scale > 1e-6)  # constant patch -> 0
+    return ((blocks - mean) * inv).reshape(n, s, s)
 
 
 @register_method

@@ -27,6 +27,12 @@ Losses, with x ~ P_data (top-view maps scaled to [-1, 1]) and z ~ P_z:
 * Full objective, Eq. 12: En and De minimise L_J + L_X + L_Z + cycle_weight * L_CYC;
   D_J, D_X, D_Z maximise their terms.
 
+Network size: the encoder's convolutions have `encoder_width` = 16 base channels (16-32-64-128
+for 64x64 maps, then a linear layer to the 1024-d code), sized for the issue's budget of 3 ms per
+frame at batch 1 on a 2-core CPU (32-64-128-256 measured 3.6-5 ms there, single thread, on a
+shared machine); the decoder and the critics, which are never timed, use `width` = 32
+(32-64-128-256, DCGAN's shape at half its width).
+
 Choices where the paper is silent: Adam, lr 2e-4, betas (0.5, 0.999) for En, De, D_X and D_Z
 (DCGAN's/BiGAN's defaults); batch 64; P_z uniform on [-1, 1]^d (BiGAN's prior; `prior="normal"`
 for N(0, I)); code 1024-d float32 (the paper, §IV.D). Side discriminators are updated once per
@@ -99,6 +105,7 @@ class StableAFL(AdversarialMethod):
         code_size: int = 1024,
         image_size: int = 64,
         width: int = 32,
+        encoder_width: int = 16,
         hidden: int = 512,
         prior: str = "uniform",
         joint_loss: str = "wasserstein",
@@ -118,6 +125,7 @@ class StableAFL(AdversarialMethod):
         self.code_size = code_size
         self.image_size = image_size
         self.width = width
+        self.encoder_width = encoder_width
         self.hidden = hidden
         self.prior = prior
         self.joint_loss = joint_loss
@@ -152,7 +160,7 @@ class StableAFL(AdversarialMethod):
 
     def build_networks(self) -> dict[str, nn.Module]:
         nets: dict[str, nn.Module] = {
-            "encoder": Encoder(self.image_size, self.code_size, self.width),
+            "encoder": Encoder(self.image_size, self.code_size, self.encoder_width),
             "decoder": Decoder(self.image_size, self.code_size, self.width),
             "joint": JointCritic(self.image_size, self.code_size, self.width, self.hidden),
             "data_side": ImageCritic(self.image_size, self.width),

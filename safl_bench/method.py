@@ -52,10 +52,10 @@ def as_topview(maps: Any, *, what: str = "maps") -> np.ndarray:
         raise DataError(f"{what}: expected a numeric array, got dtype {arr.dtype}")
     arr = arr.astype(np.float32, copy=False)
     if arr.size:
-        if not np.isfinite(arr).all():
-            raise DataError(f"{what}: contains NaN or inf")
-        lo, hi = float(arr.min()), float(arr.max())
-        if lo < -1e-6 or hi > 1 + 1e-6:
+        lo, hi = float(arr.min()), float(arr.max())  # NaN propagates into both
+        if np.isnan(lo) or np.isnan(hi):
+            raise DataError(f"{what}: contains NaN")
+        if not (lo >= -1e-6 and hi <= 1 + 1e-6):
             raise DataError(f"{what}: values must lie in [0, 1], got [{lo:g}, {hi:g}]")
     return arr
 

@@ -84,6 +84,7 @@ class AdversarialMethod(Method):
     code_size: int
     image_size: int
     width: int
+    encoder_width: int
     seed: int
     epochs: int
     batch_size: int
@@ -111,7 +112,7 @@ class AdversarialMethod(Method):
     def _init_networks(self) -> None:
         if self.prior not in ("uniform", "normal"):
             raise ConfigError(f"{self.name}: prior must be 'uniform' or 'normal', got {self.prior!r}")
-        for key in ("code_size", "width", "epochs", "batch_size", "describe_batch"):
+        for key in ("code_size", "width", "encoder_width", "epochs", "batch_size", "describe_batch"):
             value = getattr(self, key)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ConfigError(f"{self.name}: {key} must be a positive integer, got {value!r}")
@@ -151,7 +152,8 @@ class AdversarialMethod(Method):
         """En(x): (N, code_size) float32, eval mode, no gradients, in chunks of describe_batch."""
         x = self.to_input(maps)
         enc = self.encoder
-        enc.eval()
+        if enc.training:
+            enc.eval()
         out = np.empty((len(x), self.code_size), np.float32)
         with torch.inference_mode():
             for lo in range(0, len(x), self.describe_batch):

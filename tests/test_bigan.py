@@ -20,7 +20,7 @@ def _one_thread():
 
 def tiny(**kw):
     kw.setdefault("epochs", 1)
-    return BiGAN(width=4, code_size=16, hidden=16, batch_size=4, **kw)
+    return BiGAN(width=4, encoder_width=4, code_size=16, hidden=16, batch_size=4, **kw)
 
 
 def test_conforms():

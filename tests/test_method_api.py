@@ -192,17 +192,17 @@ def test_register_and_make_a_decorated_method():
 def _tiny_stable(**kw):
     from methods.stable_afl import StableAFL
 
-    return StableAFL(width=4, code_size=16, hidden=16, **kw)
+    return StableAFL(width=4, encoder_width=4, code_size=16, hidden=16, **kw)
 
 
 def test_make_method_weights_choices(monkeypatch, tmp_path):
     monkeypatch.setattr(reg, "shipped_weights_path", lambda cls: None)
     with pytest.warns(UserWarning, match="UNTRAINED"):
-        m = reg.make_method("stable_afl", width=4, code_size=16, hidden=16)
+        m = reg.make_method("stable_afl", width=4, encoder_width=4, code_size=16, hidden=16)
     assert m.config()["weights"]["source"] == "untrained"
     with pytest.raises(ConfigError, match="no shipped weights"):
         reg.make_method("stable_afl", weights="shipped")
-    m = reg.make_method("stable_afl", weights="untrained", width=4, code_size=16, hidden=16, seed=3)
+    m = reg.make_method("stable_afl", weights="untrained", width=4, encoder_width=4, code_size=16, hidden=16, seed=3)
     assert m.weights_info == {"source": "untrained", "seed": 3}
 
     path = _tiny_stable(seed=5).save(tmp_path / "stable_afl.safetensors", parts=("encoder",))
