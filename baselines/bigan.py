@@ -58,6 +58,7 @@ class BiGAN(AdversarialMethod):
         batch_size: int = 64,
         seed: int = 0,
         describe_batch: int = 256,
+        device: str = "cpu",
     ):
         self.code_size = code_size
         self.image_size = image_size
@@ -72,6 +73,7 @@ class BiGAN(AdversarialMethod):
         self.batch_size = batch_size
         self.seed = seed
         self.describe_batch = describe_batch
+        self.device = device
         self._init_networks()
 
     def build_networks(self) -> dict[str, nn.Module]:

@@ -121,6 +121,7 @@ class StableAFL(AdversarialMethod):
         batch_size: int = 64,
         seed: int = 0,
         describe_batch: int = 256,
+        device: str = "cpu",
     ):
         self.code_size = code_size
         self.image_size = image_size
@@ -141,6 +142,7 @@ class StableAFL(AdversarialMethod):
         self.batch_size = batch_size
         self.seed = seed
         self.describe_batch = describe_batch
+        self.device = device
         if joint_loss not in JOINT_LOSSES:
             raise ConfigError(f"stable_afl: joint_loss must be one of {JOINT_LOSSES}, got {joint_loss!r}")
         if side_loss not in SIDE_LOSSES:
@@ -228,7 +230,7 @@ class StableAFL(AdversarialMethod):
         loss_j = _generator_loss(self.joint_loss, dj(x, ez), dj(gx, z))
         loss_x = _generator_loss(self.side_loss, None, self.nets["data_side"](gx))
         loss_z = (_generator_loss(self.side_loss, None, self.nets["code_side"](ez))
-                  if self.code_side else torch.zeros(()))
+                  if self.code_side else torch.zeros((), device=x.device))
         cyc_x = F.mse_loss(de(ez), x)
         cyc_z = F.mse_loss(en(gx), z)
         total = loss_j + loss_x + loss_z + self.cycle_weight * (cyc_x + cyc_z)

@@ -77,7 +77,7 @@ class AdversarialMethod(Method):
     """
 
     trainable = True
-    runtime_params: ClassVar[tuple[str, ...]] = ("describe_batch",)
+    runtime_params: ClassVar[tuple[str, ...]] = ("describe_batch", "device")
     #: networks that make up a saved inference model (the encoder alone suffices to describe)
     inference_parts: ClassVar[tuple[str, ...]] = ("encoder", "decoder")
 
@@ -90,6 +90,7 @@ class AdversarialMethod(Method):
     batch_size: int
     prior: str
     describe_batch: int
+    device: str
 
     # -- to implement --------------------------------------------------------------------------
     def build_networks(self) -> dict[str, nn.Module]:
@@ -116,13 +117,21 @@ class AdversarialMethod(Method):
             value = getattr(self, key)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ConfigError(f"{self.name}: {key} must be a positive integer, got {value!r}")
+        try:
+            self._device = torch.device(self.device)
+        except (RuntimeError, TypeError) as exc:
+            raise ConfigError(f"{self.name}: not a torch device: {self.device!r}") from exc
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(int(self.seed))
-            self.nets: dict[str, nn.Module] = self.build_networks()
+            self.nets: dict[str, nn.Module] = self._on_device(self.build_networks())
         self.optims: dict[str, torch.optim.Optimizer] | None = None
         self._loaded_parts: tuple[str, ...] = tuple(self.nets)
         for net in self.nets.values():
             net.eval()
+
+    def _on_device(self, nets: dict[str, nn.Module]) -> dict[str, nn.Module]:
+        """Networks are built on the CPU (seeded, device-independent) and then moved."""
+        return {k: v.to(self._device) for k, v in nets.items()}
 
     @property
     def encoder(self) -> nn.Module:
@@ -135,8 +144,10 @@ class AdversarialMethod(Method):
     def sample_prior(self, n: int, gen: torch.Generator) -> torch.Tensor:
         """z ~ P_z: uniform on [-1, 1]^d (BiGAN's choice; default) or standard normal."""
         if self.prior == "uniform":
-            return torch.rand(n, self.code_size, generator=gen) * 2.0 - 1.0
-        return torch.randn(n, self.code_size, generator=gen)
+            z = torch.rand(n, self.code_size, generator=gen) * 2.0 - 1.0
+        else:
+            z = torch.randn(n, self.code_size, generator=gen)
+        return z.to(self._device)
 
     def to_input(self, maps: Views) -> torch.Tensor:
         """Maps (N,H,W) in [0,1] -> (N,1,S,S) in [-1,1], resized to image_size if needed."""
@@ -157,7 +168,8 @@ class AdversarialMethod(Method):
         out = np.empty((len(x), self.code_size), np.float32)
         with torch.inference_mode():
             for lo in range(0, len(x), self.describe_batch):
-                out[lo : lo + self.describe_batch] = enc(x[lo : lo + self.describe_batch]).numpy()
+                chunk = x[lo : lo + self.describe_batch].to(self._device)
+                out[lo : lo + self.describe_batch] = enc(chunk).cpu().numpy()
         return out
 
     def reconstruct(self, maps: Views) -> np.ndarray:
@@ -168,7 +180,7 @@ class AdversarialMethod(Method):
         with torch.inference_mode():
             self.encoder.eval()
             self.decoder.eval()
-            rec = self.decoder(self.encoder(x))[:, 0]
+            rec = self.decoder(self.encoder(x.to(self._device)))[:, 0].cpu()
         return ((rec + 1.0) / 2.0).clamp(0.0, 1.0).numpy().astype(np.float32)
 
     # -- state ---------------------------------------------------------------------------------
@@ -278,7 +290,7 @@ def train(
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(method.seed))
-        method.nets = method.build_networks()
+        method.nets = method._on_device(method.build_networks())
         method.optims = method.build_optimizers()
         method._loaded_parts = tuple(method.nets)
         done, log = 0, []
@@ -300,7 +312,8 @@ def train(
             order = torch.randperm(n, generator=gen)
             sums: dict[str, float] = {}
             for s in range(steps):
-                batches = [x_all[order[(s * k + j) * batch : (s * k + j + 1) * batch]] for j in range(k)]
+                batches = [x_all[order[(s * k + j) * batch : (s * k + j + 1) * batch]].to(method._device)
+                           for j in range(k)]
                 for name, value in method.train_step(batches, gen).items():
                     sums[name] = sums.get(name, 0.0) + float(value)
                 if bar is not None:

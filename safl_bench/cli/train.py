@@ -46,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", help="output directory")
     parser.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
+    parser.add_argument("--device", help="torch device to train on, e.g. cuda (default cpu; only the CPU run is bit-reproducible)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -100,6 +101,8 @@ def main(args: argparse.Namespace) -> int:
     progress = not args.no_progress
 
     params = parse_sets(args.set)
+    if args.device is not None:
+        params["device"] = args.device
     for key, value in (("epochs", args.epochs), ("batch_size", args.batch_size), ("seed", args.seed)):
         if value is not None:
             params[key] = value
