@@ -33,7 +33,9 @@ from safl_bench.errors import ConfigError, RegistryError
 from safl_bench.method import INPUT_KINDS, Method
 
 ENTRY_POINT_GROUP = "safl_bench.methods"
-BUILTIN_MODULES: tuple[str, ...] = ("baselines.sad", "baselines.bigan", "methods.stable_afl")
+BUILTIN_MODULES: tuple[str, ...] = (
+    "baselines.sad", "baselines.bigan", "methods.stable_afl", "baselines.scan_context", "baselines.m2dp",
+)
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.\-]*$")
 
 

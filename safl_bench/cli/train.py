@@ -5,7 +5,8 @@ the synthetic default's training sequences), every `--step`-th frame, from the m
 
 Writes into --out (default <home>/weights/<method>-<source>-seed<seed>):
   last.safetensors     checkpoint after the last completed epoch (all networks + optimizers)
-  log.jsonl            per-epoch losses (and seconds); the data of the training-stability figure
+  log.jsonl            per-epoch losses, seconds and the validation AUC per condition (--val-task):
+                       the data of the training-stability figure (the paper's Figure 14)
   model.safetensors    the trained encoder and decoder (+ constructor parameters)
   <method>.safetensors the encoder alone: what `describe` needs, the file to ship (<= 25 MB)
   reconstructions.png  a few training maps and their reconstructions De(En(x))
@@ -30,6 +31,9 @@ HELP = "train a learned descriptor (bigan, stable_afl) on the training sequences
 
 KITTI_TRAIN_SEQUENCES = ("01", "02", "03", "04", "05", "06", "07", "08")
 
+#: Validation tasks logged per epoch by default (the second test sequence, not the headline one).
+DEFAULT_VAL_CONDITIONS = ("T1R1", "T10R1.5")
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--method, data, training and output options."""
@@ -47,7 +51,44 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     parser.add_argument("--device", help="torch device to train on, e.g. cuda (default cpu; only the CPU run is bit-reproducible)")
+    parser.add_argument("--val-task", action="append", default=None, metavar="ID",
+                        help="task whose AUC (sequence matcher) is logged after every epoch; repeatable; "
+                             "'none' for no validation (default: sequence 09 at T1R1 and T10R1.5)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def default_val_tasks(kitti: bool) -> list[str]:
+    """Sequence 09 (KITTI or synthetic) at the default validation conditions."""
+    from safl_bench.noise import Condition
+    from safl_bench.tasks.builtin import paper_id
+
+    source = "kitti" if kitti else "synth"
+    return [paper_id(source, "09", Condition.parse(c)) for c in DEFAULT_VAL_CONDITIONS]
+
+
+def validation_callback(task_ids: list[str], source_label: str, kitti_root: str | None, progress: bool) -> Any:
+    """A `fit` callback logging, per epoch, the AUC of the sequence matcher on each task.
+
+    The task views are rendered (or read from the map cache) once, before training starts.
+    The log keys are what the leaderboard's training-stability figure reads.
+    """
+    from safl_bench.evaluation import evaluate_method
+    from safl_bench.tasks.registry import make, spec
+
+    tasks = []
+    for task_id in task_ids:
+        task = make(spec(task_id).id, kitti_root=kitti_root, progress=progress)
+        task.prepare(["topview"])
+        tasks.append(task)
+
+    def callback(epoch: int, method: Any) -> dict[str, Any]:
+        aucs: dict[str, float | None] = {}
+        for task in tasks:
+            result = evaluate_method(method, task.queries("topview"), task.database("topview"), task.truth)
+            aucs[task.spec.condition.name] = result.metrics["sequence"].roc_auc
+        return {"val_auc": aucs, "val_tasks": [t.id for t in tasks], "source": source_label}
+
+    return callback
 
 
 def parse_sets(items: list[str]) -> dict[str, Any]:
@@ -131,8 +172,12 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     maps, counts = load_training_maps(source, sequences, args.step, progress)
+    val_tasks = args.val_task if args.val_task is not None else default_val_tasks(args.kitti_root is not None)
+    if [t.lower() for t in val_tasks] == ["none"]:
+        val_tasks = []
+    callback = validation_callback(val_tasks, source.label, args.kitti_root, progress) if val_tasks else None
     print(f"training {cls.name} on {len(maps)} maps of {source.label} {', '.join(sequences)} -> {out}", file=sys.stderr)
-    method.fit(maps, checkpoint_dir=out, progress=progress)
+    method.fit(maps, checkpoint_dir=out, callback=callback, progress=progress)
 
     method.save(out / "model.safetensors", parts=("encoder", "decoder"))
     method.save(out / f"{cls.name}.safetensors", parts=("encoder",))
