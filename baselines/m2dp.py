@@ -38,7 +38,7 @@ from typing import ClassVar
 
 import numba
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from baselines._polar import quadrant_boundaries, sector_index_q
 from safl_bench.errors import ConfigError, DataError
@@ -50,6 +50,17 @@ NUM_ELEVATIONS = 16  # q
 NUM_SECTORS = 16  # t
 NUM_RINGS = 8  # l
 MAX_POINTS = 8192
+
+_controller: ThreadpoolController | None = None
+
+
+def _blas() -> ThreadpoolController:
+    """One controller for the process: building one scans the loaded libraries (~5 ms), too
+    slow to repeat per `describe` call at batch 1."""
+    global _controller
+    if _controller is None:
+        _controller = ThreadpoolController()
+    return _controller
 
 
 def pca_align(points: np.ndarray) -> np.ndarray:
@@ -245,7 +256,7 @@ class M2DP(Method):
         out = np.empty((len(views), width), dtype=np.float32)
         # the per-scan BLAS/LAPACK calls are tiny; multi-threaded BLAS only adds spin-waits
         # (5x slower on a busy 2-core machine), so they run on one thread
-        with threadpool_limits(limits=1, user_api="blas"):
+        with _blas().limit(limits=1, user_api="blas"):
             for i, pts in enumerate(views):
                 out[i] = m2dp(
                     pts, num_azimuths=self.num_azimuths, num_elevations=self.num_elevations,

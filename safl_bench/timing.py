@@ -18,15 +18,14 @@ from __future__ import annotations
 import os
 import platform
 import statistics
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
-from importlib import metadata
 from typing import Any, Protocol
 
 import numpy as np
 
+from . import provenance
 from .errors import ConfigError, DataError
 
 
@@ -39,17 +38,6 @@ class Describes(Protocol):
 _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                 "NUMBA_NUM_THREADS", "NUMBA_THREADING_LAYER")
 _LIBRARIES = ("numpy", "scipy", "scikit-learn", "numba", "torch", "safl-bench")
-
-
-def _cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 @dataclass
@@ -70,9 +58,8 @@ class Environment:
 
 
 def environment() -> Environment:
-    torch_threads = None
-    if "torch" in sys.modules:  # do not import torch just to ask
-        torch_threads = int(sys.modules["torch"].get_num_threads())
+    """Where a figure is being measured: `provenance`'s hardware and versions, plus the thread
+    settings and the load that timings depend on."""
     numba_threads = None
     try:
         import numba
@@ -80,20 +67,14 @@ def environment() -> Environment:
         numba_threads = int(numba.get_num_threads())
     except ImportError:  # pragma: no cover - numba is a dependency
         pass
-    versions = {}
-    for lib in _LIBRARIES:
-        try:
-            versions[lib] = metadata.version(lib)
-        except metadata.PackageNotFoundError:
-            pass
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return Environment(
-        cpu_model=_cpu_model(), logical_cpus=os.cpu_count() or 0, usable_cpus=usable or 0,
+        cpu_model=provenance.cpu_model(), logical_cpus=os.cpu_count() or 0,
+        usable_cpus=provenance.cpu_cores(),
         machine=platform.machine(), system=f"{platform.system()} {platform.release()}",
-        python=platform.python_version(), torch_threads=torch_threads,
+        python=platform.python_version(), torch_threads=provenance.torch_threads(),
         numba_threads=numba_threads,
         thread_env={k: os.environ[k] for k in _THREAD_VARS if k in os.environ},
-        versions=versions,
+        versions=provenance.library_versions(_LIBRARIES),
         load_avg_1m=os.getloadavg()[0] if hasattr(os, "getloadavg") else None)
 
 

@@ -157,7 +157,18 @@ def test_bad_options_are_config_errors():
     assert "code_side" not in tiny(code_side=False).nets
 
 
-def test_train_command(tmp_path, monkeypatch, capsys):
+@pytest.fixture
+def tiny_val_task(kitti_root, safl_home, monkeypatch):
+    from safl_bench import tasks
+
+    monkeypatch.setenv("SAFL_KITTI_ROOT", str(kitti_root))
+    task_id = "Test/TinyVal-T1R1-v0"
+    tasks.register(task_id, source="kitti", sequence="00", condition="T1R1", step=1)
+    yield task_id
+    tasks.unregister(task_id)
+
+
+def test_train_command(tmp_path, monkeypatch, capsys, tiny_val_task):
     from safl_bench.cli import main
     from safl_bench.cli import train as train_cli
 
@@ -167,7 +178,7 @@ def test_train_command(tmp_path, monkeypatch, capsys):
     out = tmp_path / "run"
     argv = ["train", "--method", "stable_afl", "--epochs", "1", "--batch-size", "2", "--out", str(out),
             "--no-progress", "--set", "width=4", "--set", "encoder_width=4", "--set", "code_size=16", "--set", "hidden=16",
-            "--set", "critic_steps=2"]
+            "--set", "critic_steps=2", "--val-task", tiny_val_task]
     assert main(argv) == 0
     for name in ("last.safetensors", "log.jsonl", "model.safetensors", "stable_afl.safetensors",
                  "reconstructions.png", "train.json"):
@@ -175,7 +186,11 @@ def test_train_command(tmp_path, monkeypatch, capsys):
     assert main(argv) == 2 and "--resume" in capsys.readouterr().err
     argv[argv.index("--epochs") + 1] = "2"
     assert main([*argv, "--resume"]) == 0
-    assert len((out / "log.jsonl").read_text().splitlines()) == 2
+    log = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in log] == [1, 2]
+    # the per-epoch validation AUC and data source: what the training-stability figure reads
+    assert all("T1R1" in r["val_auc"] and r["source"] == "fake" for r in log)
+    assert log[0]["val_tasks"] == [tiny_val_task]
     record = json.loads((out / "train.json").read_text())
     assert record["method"]["params"]["epochs"] == 2 and record["data"]["maps"] == 12
     loaded = Method.load(out / "stable_afl.safetensors")

@@ -35,7 +35,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
     "run": ("run", "run a method on benchmark tasks and store result records"),
     "train": ("train", "train a learned method (BiGAN, Stable-AFL) on the training sequences"),
     "leaderboard": ("leaderboard", "regenerate leaderboard tables and figures from records"),
-    "bench": ("bench", "print the speed benchmarks (maps, matcher, methods)"),
+    "bench": ("bench", "print speed figures: descriptor ms/frame per method, matcher time and memory"),
 }
 
 GROUP_HELP = {

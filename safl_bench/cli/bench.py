@@ -1,17 +1,63 @@
-"""`safl-bench bench`: not available yet (lands with the run command, issue #6)."""
+"""`safl-bench bench`: print the speed figures the issues set targets for.
+
+  safl-bench bench methods [--method NAME ...]   descriptor ms/frame at batch 1 (Table III),
+                                                 batched throughput, 4541² difference matrix
+  safl-bench bench matcher [--n 4541]            descriptors -> matches on a KITTI-00-sized
+                                                 problem, peak memory, ratio to the plain loop
+
+The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
+(`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
+"""
 
 from __future__ import annotations
 
 import argparse
 
-from safl_bench.errors import SaflError
+from safl_bench.errors import ConfigError
 
-HELP = "(not available yet: issue #6)"
+HELP = "print speed figures: descriptor ms/frame per method, matcher time and memory"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No arguments until the command lands."""
+    """`methods` or `matcher`, with their options."""
+    parser.add_argument("what", choices=("methods", "matcher"), help="what to time")
+    parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
+    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v0)")
+    parser.add_argument("--frames", type=int, default=50, help="frames per timed batch-1 run (default 50)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
+    parser.add_argument("--n", type=int, default=4541, help="frames of the difference matrix (default 4541, KITTI 00); 0 skips it")
+    parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
+    parser.add_argument("--json", help="also write every figure, with the environment, to this JSON file")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def main(args: argparse.Namespace) -> int:
-    raise SaflError("this command is not available yet (issue #6)")
+    """Run the chosen benchmark and print its table."""
+    from safl_bench.atomic import atomic_write_json
+
+    if args.repeats < 1 or args.frames < 1 or args.n < 0:
+        raise ConfigError("--repeats and --frames must be >= 1 and --n >= 0")
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ConfigError(f"--threads must be >= 1, got {args.threads}")
+        import torch
+
+        torch.set_num_threads(args.threads)
+    if args.what == "matcher":
+        from safl_bench import matching_bench
+
+        argv = ["--n", str(args.n or 4541), "--repeats", str(args.repeats)]
+        if args.json:
+            argv += ["--json", args.json]
+        return matching_bench.main(argv)
+
+    from safl_bench import method_bench
+
+    results = method_bench.run(
+        args.method, task_id=args.task or method_bench.DEFAULT_TASK, frames=args.frames,
+        repeats=args.repeats, matrix_n=args.n or None, progress=not args.quiet,
+    )
+    print(method_bench.format_results(results))
+    if args.json:
+        atomic_write_json(args.json, results)
+    return 0

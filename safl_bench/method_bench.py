@@ -1,0 +1,98 @@
+"""Benchmark of descriptor methods on the benchmark's own views (the paper's Table III).
+
+For each method: milliseconds per frame at batch 1 (the robot's case), throughput in batches,
+and for methods with their own distance the time of a KITTI-00-sized difference matrix
+(4541 x 4541 descriptors, drawn from the real ones with replacement). Views are those of a
+clean task (by default `SAFL/Synth00-T0R0-v0`, generated and cached on first use), so every
+method is timed on the input it declares (top-view maps or local-map points).
+
+    safl-bench bench methods --method stable_afl --method scan_context
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from safl_bench import timing
+from safl_bench.method import Method
+from safl_bench.method_registry import list_methods, make_method
+
+DEFAULT_TASK = "SAFL/Synth00-T0R0-v0"
+MATRIX_N = 4541
+
+
+def _own_distance(method: Method) -> bool:
+    return type(method).distance is not Method.distance
+
+
+def bench_method(
+    method: Method,
+    views: Any,
+    *,
+    frames: int = 50,
+    batch_size: int = 64,
+    repeats: int = 5,
+    matrix_n: int | None = MATRIX_N,
+) -> dict[str, Any]:
+    """All the figures of one method, JSON-ready."""
+    batch1 = timing.time_describe(method, views, batch_size=1, frames=frames, repeats=repeats)
+    batched = timing.time_describe(method, views, batch_size=batch_size, frames=None,
+                                   repeats=max(1, repeats // 2))
+    out: dict[str, Any] = {
+        "method": method.name,
+        "version": method.version,
+        "input": method.input_kind,
+        "batch1": batch1.to_dict(),
+        "batched": batched.to_dict(),
+    }
+    if matrix_n:
+        desc = np.asarray(method.describe(views))
+        pick = np.random.default_rng(0).integers(0, len(desc), matrix_n)
+        big = np.ascontiguousarray(desc[pick])
+        method.distance(big[:8], big[:8])  # compile / warm up
+        mat = timing.time_call(lambda: method.distance(big, big), name="difference matrix",
+                               repeats=1, warmup=0, n_items=matrix_n)
+        out["matrix"] = {"n": matrix_n, "own_distance": _own_distance(method), **mat.to_dict()}
+    return out
+
+
+def run(
+    methods: Sequence[str] | None = None,
+    *,
+    task_id: str = DEFAULT_TASK,
+    frames: int = 50,
+    repeats: int = 5,
+    matrix_n: int | None = MATRIX_N,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Figures for each method (default: every registered one), with the shipped weights where
+    a method has them (timing does not depend on the weights' values)."""
+    from safl_bench.tasks.registry import make
+
+    names = list(methods) if methods else [info.name for info in list_methods()]
+    task = make(task_id, progress=progress)
+    results = []
+    for name in names:
+        method = make_method(name)
+        views = task.database(method.input_kind)
+        results.append(bench_method(method, views, frames=frames, repeats=repeats, matrix_n=matrix_n))
+    return results
+
+
+def format_results(results: Sequence[dict[str, Any]]) -> str:
+    """A plain-text table: ms/frame at batch 1, frames/s batched, matrix seconds."""
+    lines = [f"{'method':14s} {'input':8s} {'ms/frame (b=1)':>15s} {'frames/s (batched)':>19s} "
+             f"{'4541² matrix s':>15s}"]
+    for r in results:
+        matrix = r.get("matrix")
+        mat = f"{matrix['median_s']:.2f}" if matrix else "-"
+        lines.append(f"{r['method']:14s} {r['input']:8s} {r['batch1']['per_item_ms']:15.2f} "
+                     f"{r['batched']['extra']['frames_per_s']:19.0f} {mat:>15s}")
+    env = results[0]["batch1"]["env"] if results else None
+    if env:
+        lines.append(f"({env['cpu_model']}, {env['usable_cpus']} CPUs, torch threads "
+                     f"{env['torch_threads']}, load avg {env['load_avg_1m']})")
+    return "\n".join(lines)
