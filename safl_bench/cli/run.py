@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
-from typing import Any
 
-from safl_bench.errors import ConfigError
+from safl_bench.cli.options import parse_key_values
 
 HELP = (
     "Run a method on benchmark tasks (default: the paper's twelve conditions on the embedded "
@@ -43,20 +41,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def parse_params(items: list[str]) -> dict[str, Any]:
-    """KEY=VALUE pairs; VALUE is JSON when it parses (numbers, true/false), else a string."""
-    params: dict[str, Any] = {}
-    for item in items:
-        key, sep, raw = item.partition("=")
-        if not sep or not key:
-            raise ConfigError(f"--param takes KEY=VALUE, got {item!r}")
-        try:
-            params[key] = json.loads(raw)
-        except json.JSONDecodeError:
-            params[key] = raw
-    return params
-
-
 def main(args: argparse.Namespace) -> int:
     from safl_bench.evaluation import EvaluationConfig
     from safl_bench.matching import MatcherConfig
@@ -65,7 +49,7 @@ def main(args: argparse.Namespace) -> int:
     from safl_bench.runner import RunOptions, resolve_tasks, run_cells, summary_table
 
     task_ids = resolve_tasks(args.task, kitti=args.kitti_root is not None)
-    method = make_method(args.method, weights=args.weights, **parse_params(args.param))
+    method = make_method(args.method, weights=args.weights, **parse_key_values(args.param, "--param"))
     options = RunOptions(
         results_dir=Path(args.results) if args.results else default_results_dir(),
         seed=args.seed,

@@ -17,7 +17,6 @@ An interrupted run continues from last.safetensors with --resume.
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 from pathlib import Path
@@ -25,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from safl_bench.cli.options import parse_key_values
 from safl_bench.errors import ConfigError
 
 HELP = "train a learned descriptor (bigan, stable_afl) on the training sequences"
@@ -91,20 +91,6 @@ def validation_callback(task_ids: list[str], source_label: str, kitti_root: str 
     return callback
 
 
-def parse_sets(items: list[str]) -> dict[str, Any]:
-    """KEY=VALUE pairs -> dict, values parsed as JSON when they are JSON."""
-    out: dict[str, Any] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise ConfigError(f"--set expects KEY=VALUE, got {item!r}")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
-
-
 def load_training_maps(source: Any, sequences: list[str], step: int, progress: bool) -> tuple[np.ndarray, dict[str, int]]:
     """Clean top-view maps of every `step`-th frame of `sequences`, concatenated."""
     from safl_bench import mapcache
@@ -141,7 +127,7 @@ def main(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     progress = not args.no_progress
 
-    params = parse_sets(args.set)
+    params = parse_key_values(args.set, "--set")
     if args.device is not None:
         params["device"] = args.device
     for key, value in (("epochs", args.epochs), ("batch_size", args.batch_size), ("seed", args.seed)):
