@@ -212,7 +212,14 @@ def make_method(name: str, *, weights: str | Path | None = None, **params: Any) 
     if weights is None or weights == "shipped":
         shipped = shipped_weights_path(cls)
         if shipped is not None:
-            return cls.load(shipped, **params)
+            method = cls.load(shipped, **params)
+            # records name the shipped file by package, not by this machine's install path
+            method.weights_info = {
+                **(method.weights_info or {}),
+                "source": "shipped",
+                "path": f"{cls.__module__.rsplit('.', 1)[0]}/weights/{shipped.name}",
+            }
+            return method
         if weights == "shipped":
             raise ConfigError(
                 f"method {name!r} has no shipped weights in this installation; train them with "

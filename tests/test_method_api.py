@@ -208,7 +208,8 @@ def test_make_method_weights_choices(monkeypatch, tmp_path):
     path = _tiny_stable(seed=5).save(tmp_path / "stable_afl.safetensors", parts=("encoder",))
     monkeypatch.setattr(reg, "shipped_weights_path", lambda cls: path)
     shipped = reg.make_method("stable_afl")
-    assert shipped.weights_info["source"] == "file" and len(shipped.weights_info["sha256"]) == 64
+    assert shipped.weights_info["source"] == "shipped" and len(shipped.weights_info["sha256"]) == 64
+    assert shipped.weights_info["path"] == f"methods/weights/{path.name}"
     assert shipped.seed == 5 and shipped.code_size == 16  # parameters come from the file
     maps = sample_views("topview", n=4)
     np.testing.assert_array_equal(shipped.describe(maps), _tiny_stable(seed=5).describe(maps))
