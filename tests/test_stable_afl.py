@@ -214,3 +214,15 @@ def test_encoder_speed_at_batch_1(benchmark):
     method.describe(maps)
     benchmark(method.describe, maps)
     assert benchmark.stats.stats.median < 3e-3
+
+
+def test_cycle_norm_sum_is_the_squared_l2_norm_per_sample():
+    from methods.stable_afl import _squared_error
+
+    gen = torch.Generator().manual_seed(0)
+    a, b = torch.rand(4, 1, 8, 8, generator=gen), torch.rand(4, 1, 8, 8, generator=gen)
+    per_sample = ((a - b) ** 2).sum(dim=(1, 2, 3))
+    assert torch.allclose(_squared_error(a, b, "sum"), per_sample.mean())
+    assert torch.allclose(_squared_error(a, b, "mean"), per_sample.mean() / 64)
+    with pytest.raises(ConfigError, match="cycle_norm"):
+        tiny(cycle_norm="l1")
