@@ -104,6 +104,20 @@ def test_cli_run_prints_the_table(tiny_tasks, kitti_root, tmp_path, capsys):
     assert "R@100%P" in out and tiny_tasks[0] in out and "computed" in out
     record = json.loads(next(tmp_path.rglob("seed-0.json")).read_text())
     assert record["method"]["name"] == "sad"
+    assert record["matcher"]["sequence"]["enhance_window"] == 10  # the default: Table I + OpenSeqSLAM
+
+
+def test_cli_run_matcher_settings_are_used_and_recorded(tiny_tasks, kitti_root, tmp_path, capsys):
+    rc = main(["run", "--method", "sad", "--task", tiny_tasks[0], "--kitti-root", str(kitti_root),
+               "--results", str(tmp_path), "--quiet", "--matcher", "enhance_window=0", "--matcher", "ds=3",
+               "--score", "ratio"])
+    assert rc == 0
+    record = json.loads(next(tmp_path.rglob("seed-0.json")).read_text())
+    seq = record["matcher"]["sequence"]
+    assert (seq["enhance_window"], seq["ds"], seq["score"]) == (0, 3, "ratio")
+    assert record["matcher"]["single_frame"]["score"] == "ratio"
+    assert main(["run", "--method", "sad", "--task", tiny_tasks[0], "--matcher", "speed=2"]) == 2
+    assert "--matcher: unknown setting(s) ['speed']" in capsys.readouterr().err
 
 
 def test_cli_run_bad_input_is_one_line(tiny_tasks, tmp_path, capsys):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from safl_bench.cli.options import parse_key_values
 
@@ -38,12 +39,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--score", choices=("min", "ratio"), default="min",
         help="matcher score: the paper's lowest S (min) or OpenSeqSLAM's ratio (default: min)",
     )
+    parser.add_argument(
+        "--matcher", action="append", default=[], metavar="KEY=VALUE",
+        help="sequence-matcher setting (safl_bench.matching.MatcherConfig), e.g. enhance_window=0 "
+        "or ds=5; repeatable; recorded with every result (default: the paper's Table I)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def matcher_config(score: str, items: list[str]) -> Any:
+    """The sequence matcher's settings: the paper's defaults, `--score`, then `--matcher` pairs."""
+    import dataclasses
+
+    from safl_bench.errors import ConfigError
+    from safl_bench.matching import MatcherConfig
+
+    settings = {"score": score, **parse_key_values(items, "--matcher")}
+    valid = {f.name for f in dataclasses.fields(MatcherConfig)} - {"method"}
+    unknown = sorted(set(settings) - valid)
+    if unknown:
+        raise ConfigError(f"--matcher: unknown setting(s) {unknown}; valid: {sorted(valid)}")
+    return MatcherConfig(**settings)
 
 
 def main(args: argparse.Namespace) -> int:
     from safl_bench.evaluation import EvaluationConfig
-    from safl_bench.matching import MatcherConfig
     from safl_bench.method_registry import make_method
     from safl_bench.records import default_results_dir
     from safl_bench.runner import RunOptions, resolve_tasks, run_cells, summary_table
@@ -55,7 +75,7 @@ def main(args: argparse.Namespace) -> int:
         seed=args.seed,
         force=args.force,
         kitti_root=args.kitti_root,
-        evaluation=EvaluationConfig(MatcherConfig(score=args.score)),
+        evaluation=EvaluationConfig(matcher_config(args.score, args.matcher)),
         progress=not args.quiet,
     )
     outcomes = run_cells(method, task_ids, options)
