@@ -109,5 +109,5 @@ def build_views(
                     tops[lb][pos] = images[j]
             if "points" in kinds:
                 for j, lb in enumerate(labels):
-                    points[lb][pos] = view_points(centres, vps[j], robot_z)
+                    points[lb][pos] = view_points(centres, vps[j], robot_z, config.extent_m / 2)
     return out

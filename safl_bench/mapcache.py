@@ -28,6 +28,9 @@ from safl_bench.noise import Condition, sample_offsets
 from safl_bench.paths import map_cache_dir
 
 CACHE_VERSION = 1  # bump when the rendering code changes what a key's file holds
+#: per view kind, bumped when only that kind's rendering changes (points 2: cropped to the
+#: top view's window)
+KIND_VERSIONS = {"topview": 1, "points": 2}
 
 
 def cache_key(
@@ -35,8 +38,10 @@ def cache_key(
     condition: Condition, seed: int, kind: str,
 ) -> str:
     """The cache key of one set of views."""
+    kind_version = KIND_VERSIONS.get(kind, 1)
+    bumped = () if kind_version == 1 else (kind_version,)  # keys of unchanged kinds stay valid
     return fingerprint(
-        CACHE_VERSION, source.fingerprint(sequence), str(sequence), config,
+        CACHE_VERSION, *bumped, source.fingerprint(sequence), str(sequence), config,
         np.asarray(frames, dtype=np.int64), condition, None if condition.is_clean else int(seed), kind,
     )
 
@@ -55,7 +60,7 @@ def _meta(source: DataSource, sequence: str, config: MapConfig, frames: np.ndarr
     return json.dumps(to_jsonable({
         "source": source.label, "root": str(source.root), "sequence": sequence, "config": config,
         "frames": len(frames), "condition": condition.name, "seed": seed, "kind": kind,
-        "version": CACHE_VERSION,
+        "version": CACHE_VERSION, "kind_version": KIND_VERSIONS.get(kind, 1),
     }), sort_keys=True)
 
 

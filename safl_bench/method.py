@@ -12,7 +12,7 @@ Class attributes say what the harness must know without running anything:
 * `name`, `version`: go into every result record (bump `version` when outputs change);
 * `input_kind`: which view the method reads. "topview": an (N, H, W) float32 array of top-view
   maps in [0, 1]; "points": a list of (M_i, 3) float32 arrays, the local-map points in each
-  viewpoint's frame. The harness asks the map cache for `method.input_kind` and hands the result
+  viewpoint's frame, inside the top view's window (the same part of the map the top view shows). The harness asks the map cache for `method.input_kind` and hands the result
   to `fit`/`describe` unchanged; nothing is special-cased per method.
 
 `get_params()`/`set_params()` follow scikit-learn (read from the constructor's signature, so

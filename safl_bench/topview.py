@@ -105,16 +105,28 @@ def render(xy: np.ndarray, value: np.ndarray, viewpoints: np.ndarray, config: Ma
     return out
 
 
-def view_points(centres: np.ndarray, viewpoint: np.ndarray, robot_z: float) -> np.ndarray:
+def view_points(
+    centres: np.ndarray, viewpoint: np.ndarray, robot_z: float, half_extent_m: float | None = None
+) -> np.ndarray:
     """Local-map points (M, 3) float32 in the viewpoint frame (x forward, y left, z up, origin
-    at the sensor height of the robot)."""
+    at the sensor height of the robot).
+
+    With `half_extent_m` (the top view's `extent_m / 2`), only the points inside the top view's
+    window are kept (-h < x <= h, -h < y <= h, the pixels `render` fills), so a points view and a
+    top view of the same viewpoint show the same part of the map: moving the viewpoint changes
+    what is seen, not only the coordinates (otherwise a descriptor that centres and aligns the
+    cloud, like M2DP, would be blind to the viewpoint noise by construction).
+    """
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     vx, vy, yaw = (float(v) for v in viewpoint)
     c, s = math.cos(yaw), math.sin(yaw)
     dx, dy = centres[:, 0] - vx, centres[:, 1] - vy
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, centres[:, 2] - robot_z], axis=1).astype(
-        np.float32
-    )
+    fwd, left = c * dx + s * dy, -s * dx + c * dy
+    pts = np.stack([fwd, left, centres[:, 2] - robot_z], axis=1)
+    if half_extent_m is not None:
+        h = float(half_extent_m)
+        pts = pts[(fwd > -h) & (fwd <= h) & (left > -h) & (left <= h)]
+    return pts.astype(np.float32)
 
 
 def scan_topview(points: np.ndarray, config: MapConfig | None = None) -> np.ndarray:

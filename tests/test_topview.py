@@ -86,6 +86,28 @@ def test_view_points_frame() -> None:
     np.testing.assert_allclose(pts, [[1.0, 0.0, 0.5]], atol=1e-6)
 
 
+def test_view_points_keep_what_the_top_view_shows() -> None:
+    """Cropped to the top view's window: a moved viewpoint sees another part of the map, and
+    every kept point lands in a pixel of the top view of the same viewpoint."""
+    rng = np.random.default_rng(0)
+    centres = np.column_stack([rng.uniform(-60, 60, (4000, 2)), rng.uniform(-1, 3, 4000)])
+    h = CFG.extent_m / 2
+    vp = np.array([3.0, -2.0, 0.7])
+    pts = view_points(centres, vp, robot_z=0.0, half_extent_m=h)
+    full = view_points(centres, vp, robot_z=0.0)
+    assert 0 < len(pts) < len(full)
+    assert (pts[:, 0] > -h).all() and (pts[:, 0] <= h).all() and (np.abs(pts[:, 1]) <= h).all()
+    inside = (full[:, 0] > -h) & (full[:, 0] <= h) & (full[:, 1] > -h) & (full[:, 1] <= h)
+    np.testing.assert_array_equal(pts, full[inside])
+    for x, y in pts[:50, :2].astype(np.float64):  # each kept point fills a pixel of the view
+        img = render(np.array([[vp[0] + np.cos(vp[2]) * x - np.sin(vp[2]) * y,
+                                vp[1] + np.sin(vp[2]) * x + np.cos(vp[2]) * y]]),
+                     np.array([1.0], np.float32), vp[None], CFG)
+        assert img.max() == 1.0
+    moved = view_points(centres, vp + np.array([20.0, 0.0, 0.0]), robot_z=0.0, half_extent_m=h)
+    assert len(moved) != len(pts)
+
+
 def test_scan_topview_is_deterministic() -> None:
     rng = np.random.default_rng(3)
     scan = rng.uniform(-30, 30, size=(5000, 4)).astype(np.float32)
