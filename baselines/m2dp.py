@@ -102,7 +102,7 @@ def projection_planes(num_azimuths: int, num_elevations: int) -> tuple[np.ndarra
     return px_all, py_all
 
 
-@numba.njit(cache=True, fastmath=True)
+@numba.njit(cache=True, fastmath=True, parallel=True)
 def _plane_bins(
     data: np.ndarray, px: np.ndarray, py: np.ndarray, max_rho: float, num_rings: int,
     num_sectors: int, cq: np.ndarray, sq: np.ndarray, out: np.ndarray,
@@ -111,17 +111,17 @@ def _plane_bins(
 
     Sector k covers atan2(v, u) in [-pi + k w, -pi + (k + 1) w), i.e. the angle of (-u, -v)
     from 0, found exactly as in `baselines._polar.sector_index_q` (inlined and unrolled
-    for the default 16 sectors so that the loop vectorises)."""
+    for the default 16 sectors so that the loop vectorises). Planes run in parallel."""
     n = data.shape[0]
     m = num_sectors // 4
-    index = np.empty(n, dtype=np.int32)
     inv_rho = 1.0 / max_rho
     xs = data[:, 0].copy()
     ys = data[:, 1].copy()
     zs = data[:, 2].copy()
     c1, c2, c3 = (cq[0], cq[1], cq[2]) if m == 4 else (0.0, 0.0, 0.0)
     s1, s2, s3 = (sq[0], sq[1], sq[2]) if m == 4 else (0.0, 0.0, 0.0)
-    for k in range(px.shape[0]):
+    for k in numba.prange(px.shape[0]):
+        index = np.empty(n, dtype=np.int32)
         a0, a1, a2 = px[k, 0], px[k, 1], px[k, 2]
         b0, b1, b2 = py[k, 0], py[k, 1], py[k, 2]
         if m == 4:
