@@ -12,6 +12,7 @@ Tasks call `load_views`; `prepare` renders many conditions and kinds in one pass
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -20,11 +21,12 @@ import numpy as np
 
 from safl_bench.atomic import atomic_path
 from safl_bench.datasource import DataSource
-from safl_bench.errors import ConfigError
+from safl_bench.errors import ConfigError, DataError
 from safl_bench.fingerprint import fingerprint, to_jsonable
 from safl_bench.mapbuild import KINDS, build_views, check_frames
 from safl_bench.mapconfig import MapConfig
 from safl_bench.noise import Condition, sample_offsets
+from safl_bench.parallel import Parallel, run_jobs
 from safl_bench.paths import map_cache_dir
 
 CACHE_VERSION = 1  # bump when the rendering code changes what a key's file holds
@@ -98,9 +100,15 @@ def prepare(
     seed: int,
     kinds: Sequence[str] = ("topview",),
     progress: bool = True,
+    parallel: Parallel | None = None,
 ) -> dict[tuple[Condition, str], Path]:
     """Make sure the views of every (condition, kind) are cached; render the missing ones in
-    one pass over the scans. Returns {(condition, kind): cache file}."""
+    one pass over the scans. Returns {(condition, kind): cache file}.
+
+    With `parallel` (local workers or Ray) the frames are split into contiguous chunks rendered
+    on the workers, each from a fresh local map of the `window` scans before its first frame
+    (the map at a frame depends only on those scans, so the views are the serial ones); this
+    process joins the chunks and writes the cache files."""
     sequence = str(sequence)
     conds = list(dict.fromkeys(conditions))
     for kind in kinds:
@@ -115,10 +123,47 @@ def prepare(
         offsets = {
             c.name: None if c.is_clean else sample_offsets(len(frames), c, seed) for c in todo_conds
         }
-        views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
+        if parallel is None or parallel.serial or len(frames) < 2:
+            views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
+        else:
+            views = _build_chunked(source, sequence, config, frames, offsets, todo_kinds, parallel, progress)
         for c, k in missing:
             _save(paths[c, k], views[c.name, k], _meta(source, sequence, config, frames, c, seed, k))
     return paths
+
+
+def _build_chunk(
+    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    offsets: dict[str, np.ndarray | None], kinds: Sequence[str],
+) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
+    """One chunk of `prepare`'s views (runs on a worker)."""
+    return build_views(source.sequence(sequence), config, frames, offsets, kinds, progress=False)
+
+
+def _build_chunked(
+    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    offsets: dict[str, np.ndarray | None], kinds: Sequence[str], parallel: Parallel, progress: bool,
+) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
+    from tqdm import tqdm
+
+    chunks = [c for c in np.array_split(np.arange(len(frames)), min(len(frames), 2 * parallel.slots())) if len(c)]
+    portable = dataclasses.replace(source, _open={})  # open sequences stay in this process
+    jobs = [
+        (portable, sequence, config, frames[c], {lb: None if o is None else o[c] for lb, o in offsets.items()}, kinds)
+        for c in chunks
+    ]
+    bar = tqdm(total=len(jobs), desc=f"maps {sequence} ({parallel.describe()})", unit="chunk",
+               disable=not progress, leave=False)
+    results = run_jobs(_build_chunk, jobs, parallel, on_done=lambda i, r: bar.update(1))
+    bar.close()
+    errors = [r.error for r in results if r.error is not None]
+    if errors:
+        raise DataError(f"building the maps of sequence {sequence} failed on a worker: {errors[0]}")
+    views: dict[tuple[str, str], np.ndarray | list[np.ndarray]] = {}
+    for key in results[0].value:
+        parts = [r.value[key] for r in results]
+        views[key] = np.concatenate(parts) if key[1] == "topview" else [v for part in parts for v in part]
+    return views
 
 
 def load_views(

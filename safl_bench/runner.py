@@ -22,6 +22,7 @@ from typing import Any
 from safl_bench.errors import SaflError
 from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method
 from safl_bench.method import Method
+from safl_bench.parallel import Parallel, run_jobs
 from safl_bench.records import (
     CorruptRecordError,
     MethodInfo,
@@ -35,10 +36,11 @@ from safl_bench.records import (
     write_record,
 )
 from safl_bench.tasks import registry, spec, suite
+from safl_bench.tasks.spec import TaskSpec
 from safl_bench.tasks.task import Task
 from safl_bench.timing import time_describe
 
-#: How timing figures are taken in this process (issue #8 adds parallel runs).
+#: How timing figures are taken in a serial run (parallel runs say where the cells ran).
 HOW_RUN = "sequential, one cell at a time in one process"
 
 
@@ -100,6 +102,99 @@ def _same_run(old: ResultRecord, method: MethodInfo, task_fp: str, matcher: dict
     return ""
 
 
+def _existing(
+    method: Method, task_id: str, options: RunOptions, log: Callable[[str], None]
+) -> tuple[int, Path, CellOutcome | None]:
+    """(seed, record path, the reused outcome or None when the cell must be computed)."""
+    registered = spec(task_id)
+    seed = registered.seed if options.seed is None else int(options.seed)
+    info = method_info(method)
+    path = record_path(options.results_dir, info.name, info.version, registered.id, seed)
+    if path.is_file() and not options.force:
+        try:
+            old = load_record(path)
+        except CorruptRecordError as exc:
+            log(f"warning: {exc}; recomputing it")
+        else:
+            why = _same_run(old, info, registered.fingerprint, options.evaluation.to_dict())
+            if not why:
+                return seed, path, CellOutcome(registered.id, seed, "reused", path, old)
+            log(f"note: {path} was made with other settings ({why}); recomputing it")
+    return seed, path, None
+
+
+def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool) -> Task:
+    run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
+    return Task.from_spec(run_spec, kitti_root=options.kitti_root, progress=progress)
+
+
+@dataclass
+class CellEvaluation:
+    """What evaluating a cell produced, before timing (picklable: it comes back from workers)."""
+
+    results: dict[str, Any]  # mode -> ModeResult
+    describe_frames_per_s: float
+    matcher_s: float
+    data: dict[str, Any]  # Task.info()
+    source_label: str
+
+
+def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunOptions,
+                  progress: bool = True) -> CellEvaluation:
+    """Render (or read) the views, describe, match and score one cell; no timing, no record.
+    Runs in this process or on a worker (which gets the task's spec, not its id: tasks
+    registered at run time exist only in this process)."""
+    task = _task(registered, seed, options, progress)
+    kind = method.input_kind
+    task.prepare([kind])
+    evaluation = evaluate_method(
+        method, task.queries(kind), task.database(kind), task.truth,
+        config=options.evaluation, revisit=task.spec.protocol == "revisit",
+    )
+    return CellEvaluation(
+        results={m: mode_result_from_evaluation(evaluation.metrics[m]) for m in MODES},
+        describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
+        matcher_s=evaluation.matcher_s,
+        data=task.info(),
+        source_label=task.source.label if task.source is not None else task.spec.source,
+    )
+
+
+def finish_cell(method: Method, task_id: str, seed: int, options: RunOptions,
+                evaluation: CellEvaluation, how_run: str) -> CellOutcome:
+    """Time the method at batch 1 on the cell's queries (in this process, nothing else of the
+    run competing for the cores) and write the record atomically."""
+    registered = spec(task_id)
+    queries = _task(registered, seed, options, progress=False).queries(method.input_kind)
+    batch1 = time_describe(
+        method, queries, batch_size=1, frames=options.timing_frames,
+        repeats=options.timing_repeats, warmup=1,
+    )
+    timings = Timings(
+        describe_ms_per_frame=batch1.per_item_ms,
+        describe_frames_per_s=evaluation.describe_frames_per_s,
+        matcher_s=evaluation.matcher_s,
+        peak_memory_mb=batch1.peak_rss_mb,
+        repeats=options.timing_repeats,
+        how_run=how_run,
+    )
+    data = evaluation.data
+    record = new_record(
+        method=method_info(method),
+        task=task_info(
+            registered, evaluation.source_label,
+            data_fingerprint=data.get("data_fingerprint"),
+            n_queries=data["n_queries"], n_database=data["n_database"],
+        ),
+        seed=seed,
+        matcher=options.evaluation.to_dict(),
+        results=evaluation.results,
+        timings=timings,
+    )
+    written = write_record(options.results_dir, record)
+    return CellOutcome(registered.id, seed, "computed", written, record)
+
+
 def run_cell(
     method: Method,
     task_id: str,
@@ -107,65 +202,12 @@ def run_cell(
     *,
     log: Callable[[str], None] = print,
 ) -> CellOutcome:
-    """Evaluate `method` on one task and seed; write (or reuse) its record."""
-    registered = spec(task_id)
-    seed = registered.seed if options.seed is None else int(options.seed)
-    info = method_info(method)
-    path = record_path(options.results_dir, info.name, info.version, registered.id, seed)
-    matcher = options.evaluation.to_dict()
-    if path.is_file() and not options.force:
-        try:
-            old = load_record(path)
-        except CorruptRecordError as exc:
-            log(f"warning: {exc}; recomputing it")
-        else:
-            why = _same_run(old, info, registered.fingerprint, matcher)
-            if not why:
-                return CellOutcome(registered.id, seed, "reused", path, old)
-            log(f"note: {path} was made with other settings ({why}); recomputing it")
-
-    run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
-    task = Task.from_spec(run_spec, kitti_root=options.kitti_root, progress=options.progress)
-    kind = method.input_kind
-    task.prepare([kind])
-    database, queries = task.database(kind), task.queries(kind)
-    evaluation = evaluate_method(
-        method,
-        queries,
-        database,
-        task.truth,
-        config=options.evaluation,
-        revisit=registered.protocol == "revisit",
-    )
-    batch1 = time_describe(
-        method, queries, batch_size=1, frames=options.timing_frames,
-        repeats=options.timing_repeats, warmup=1,
-    )
-    timings = Timings(
-        describe_ms_per_frame=batch1.per_item_ms,
-        describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
-        matcher_s=evaluation.matcher_s,
-        peak_memory_mb=batch1.peak_rss_mb,
-        repeats=options.timing_repeats,
-        how_run=HOW_RUN,
-    )
-    data = task.info()
-    record = new_record(
-        method=info,
-        task=task_info(
-            registered,
-            task.source.label if task.source is not None else registered.source,
-            data_fingerprint=data.get("data_fingerprint"),
-            n_queries=data["n_queries"],
-            n_database=data["n_database"],
-        ),
-        seed=seed,
-        matcher=matcher,
-        results={m: mode_result_from_evaluation(evaluation.metrics[m]) for m in MODES},
-        timings=timings,
-    )
-    written = write_record(options.results_dir, record)
-    return CellOutcome(registered.id, seed, "computed", written, record)
+    """Evaluate `method` on one task and seed in this process; write (or reuse) its record."""
+    seed, _, reused = _existing(method, task_id, options, log)
+    if reused is not None:
+        return reused
+    evaluation = evaluate_cell(method, spec(task_id), seed, options, progress=options.progress)
+    return finish_cell(method, task_id, seed, options, evaluation, HOW_RUN)
 
 
 def run_cells(
@@ -174,8 +216,16 @@ def run_cells(
     options: RunOptions,
     *,
     log: Callable[[str], None] | None = None,
+    parallel: Parallel | None = None,
 ) -> list[CellOutcome]:
-    """Run every task in turn; a cell that fails on bad data is reported and the others go on."""
+    """Run every task; a cell that fails (bad data, a dead worker) is reported and the others
+    go on.
+
+    Serially (the default) each cell is evaluated, timed and written in turn. With `parallel`
+    (local workers or Ray) the cells are evaluated on the workers, then timed and written one
+    by one in this process once every worker has finished, so that no timing is taken while
+    workers compete for the cores; only this process writes records.
+    """
     from tqdm import tqdm
 
     def say(message: str) -> None:
@@ -184,18 +234,52 @@ def run_cells(
         else:
             tqdm.write(message, file=sys.stderr)
 
-    outcomes: list[CellOutcome] = []
-    bar = tqdm(task_ids, desc=f"{method.name}", unit="task", disable=not options.progress)
-    for task_id in bar:
-        bar.set_postfix_str(task_id)
+    def failed(task_id: str, message: str) -> CellOutcome:
+        seed = spec(task_id).seed if options.seed is None else options.seed
+        path = record_path(options.results_dir, method.name, method.version, task_id, seed)
+        say(f"error: {task_id}: {message}")
+        return CellOutcome(task_id, seed, "failed", path, message=message)
+
+    if parallel is None or parallel.serial:
+        outcomes: list[CellOutcome] = []
+        bar = tqdm(task_ids, desc=f"{method.name}", unit="task", disable=not options.progress)
+        for task_id in bar:
+            bar.set_postfix_str(task_id)
+            try:
+                outcomes.append(run_cell(method, task_id, options, log=say))
+            except SaflError as exc:
+                outcomes.append(failed(task_id, str(exc)))
+        return outcomes
+
+    by_task: dict[str, CellOutcome] = {}
+    todo: list[tuple[str, int]] = []
+    for task_id in task_ids:
         try:
-            outcomes.append(run_cell(method, task_id, options, log=say))
+            seed, _, reused = _existing(method, task_id, options, say)
         except SaflError as exc:
-            seed = spec(task_id).seed if options.seed is None else options.seed
-            path = record_path(options.results_dir, method.name, method.version, task_id, seed)
-            say(f"error: {task_id}: {exc}")
-            outcomes.append(CellOutcome(task_id, seed, "failed", path, message=str(exc)))
-    return outcomes
+            by_task[task_id] = failed(task_id, str(exc))
+            continue
+        if reused is not None:
+            by_task[task_id] = reused
+        else:
+            todo.append((task_id, seed))
+    how = f"evaluated on {parallel.describe()}; timed afterwards, sequentially, in the main process"
+    bar = tqdm(total=len(todo), desc=f"{method.name} ({parallel.describe()})", unit="task",
+               disable=not options.progress)
+    results = run_jobs(
+        evaluate_cell, [(method, spec(t), seed, options, False) for t, seed in todo], parallel,
+        on_done=lambda i, r: bar.update(1),
+    )
+    bar.close()
+    for (task_id, seed), result in zip(todo, results, strict=True):
+        if result.error is not None:
+            by_task[task_id] = failed(task_id, result.error)
+            continue
+        try:
+            by_task[task_id] = finish_cell(method, task_id, seed, options, result.value, how)
+        except SaflError as exc:
+            by_task[task_id] = failed(task_id, str(exc))
+    return [by_task[t] for t in task_ids]
 
 
 def _pct(value: float | None) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
+from safl_bench.cli.options import add_parallel_arguments, parallel_from
 from safl_bench.errors import ConfigError
 from safl_bench.mapbuild import DEFAULT_STEP, KINDS, select_frames
 from safl_bench.mapconfig import BACKENDS, ENCODINGS, MapConfig
@@ -31,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kinds", nargs="+", choices=KINDS, default=["topview"],
                         help="views to cache (default: topview)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed and synthetic seed (default 0)")
+    add_parallel_arguments(parser, "build the maps (chunks of each sequence's frames)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -54,6 +56,7 @@ def main(args: argparse.Namespace) -> int:
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")
     conditions = parse_conditions(args.conditions)
+    parallel = parallel_from(args)
     config = replace(MapConfig(), backend=args.backend, encoding=args.encoding)
     source = resolve_source(args.kitti_root, sequences=args.sequences, seed=args.seed,
                             progress=not args.quiet)
@@ -66,7 +69,7 @@ def main(args: argparse.Namespace) -> int:
         seq = source.sequence(name)
         frames = select_frames(len(seq), args.step)
         paths = prepare(source, name, config, frames=frames, conditions=conditions,
-                        seed=args.seed, kinds=args.kinds, progress=not args.quiet)
+                        seed=args.seed, kinds=args.kinds, progress=not args.quiet, parallel=parallel)
         folder = next(iter(paths.values())).parent
         print(f"{source.label} sequence {name}: {len(frames)} frames x {len(conditions)} conditions "
               f"x {len(args.kinds)} kinds cached in {folder}")

@@ -21,3 +21,19 @@ def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
         except json.JSONDecodeError:
             out[key] = raw
     return out
+
+
+def add_parallel_arguments(parser: Any, what: str) -> None:
+    """--workers N and --ray ADDRESS (see `safl_bench.parallel`)."""
+    parser.add_argument("--workers", type=int, default=1, metavar="N",
+                        help=f"{what} in N local worker processes (default 1: in this process)")
+    parser.add_argument("--ray", metavar="ADDRESS",
+                        help=f"{what} on a Ray cluster: 'auto' (the cluster this machine is in), "
+                             "'ray://HOST:10001', or 'local' (start one here); needs safl-bench[ray]")
+
+
+def parallel_from(args: Any) -> Any:
+    """The `Parallel` the options ask for."""
+    from safl_bench.parallel import Parallel
+
+    return Parallel(workers=args.workers, ray_address=args.ray)

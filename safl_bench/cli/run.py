@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from safl_bench.cli.options import parse_key_values
+from safl_bench.cli.options import add_parallel_arguments, parallel_from, parse_key_values
 
 HELP = (
     "Run a method on benchmark tasks (default: the paper's twelve conditions on the embedded "
@@ -44,6 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sequence-matcher setting (safl_bench.matching.MatcherConfig), e.g. enhance_window=0 "
         "or ds=5; repeatable; recorded with every result (default: the paper's Table I)",
     )
+    add_parallel_arguments(parser, "evaluate the cells")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -78,7 +79,7 @@ def main(args: argparse.Namespace) -> int:
         evaluation=EvaluationConfig(matcher_config(args.score, args.matcher)),
         progress=not args.quiet,
     )
-    outcomes = run_cells(method, task_ids, options)
+    outcomes = run_cells(method, task_ids, options, parallel=parallel_from(args))
     print(f"{method.name}@{method.version} — records in {options.results_dir}")
     print(summary_table(outcomes))
     failed = [o for o in outcomes if o.status == "failed"]

@@ -1,0 +1,140 @@
+"""Parallel runs (issue 8): local worker processes and a local Ray cluster give exactly the
+records of a serial run; a worker killed mid-cell leaves no partial record and a rerun
+completes the grid; only the main process writes records and takes timings."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from parallel_methods import KillOnMarker
+
+from safl_bench import mapcache, runner, tasks
+from safl_bench.cli import main
+from safl_bench.datasource import kitti_source
+from safl_bench.errors import ConfigError
+from safl_bench.mapbuild import select_frames
+from safl_bench.mapconfig import MapConfig
+from safl_bench.method_registry import make_method
+from safl_bench.noise import CLEAN, Condition
+from safl_bench.parallel import Parallel, run_jobs
+
+TASKS = ("Test/ParA-T1R1-v0", "Test/ParA-T5R1-v0", "Test/ParA-T1R2-v0")
+
+
+@pytest.fixture
+def grid(kitti_root: Path, safl_home: Path) -> Iterator[tuple[str, ...]]:
+    for task_id in TASKS:
+        tasks.register(task_id, source="kitti", sequence="00", condition=task_id.split("-")[1],
+                       step=1, map_config=MapConfig(size=32))
+    yield TASKS
+    for task_id in TASKS:
+        tasks.unregister(task_id)
+
+
+def options(kitti_root: Path, results: Path, **kw: object) -> runner.RunOptions:
+    return runner.RunOptions(results_dir=results, kitti_root=str(kitti_root), progress=False,
+                             timing_frames=3, timing_repeats=2, **kw)  # type: ignore[arg-type]
+
+
+def _results(outcomes: list[runner.CellOutcome]) -> dict[str, object]:
+    """Everything of the records but when and how fast they ran."""
+    out = {}
+    for o in outcomes:
+        assert o.status == "computed", (o.task_id, o.message)
+        data = json.loads(o.path.read_text())
+        out[str(o.path.relative_to(o.path.parents[2]))] = (data["results"], data["task"], data["method"], data["matcher"])
+    return out
+
+
+def test_local_workers_give_the_serial_records(grid, kitti_root, tmp_path):
+    sad = make_method("sad")
+    serial = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "serial"))
+    par = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "par"), parallel=Parallel(workers=2))
+    assert _results(serial) == _results(par)
+    how = {o.record.timings.how_run for o in par if o.record is not None}
+    assert how == {"evaluated on 2 local worker processes; timed afterwards, sequentially, in the main process"}
+    again = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "par"), parallel=Parallel(workers=2))
+    assert {o.status for o in again} == {"reused"}
+
+
+def test_a_killed_worker_loses_only_its_cell_and_a_rerun_completes(grid, kitti_root, tmp_path):
+    marker = tmp_path / "kill"
+    marker.write_text("")
+    results = tmp_path / "res"
+    always = KillOnMarker(marker=str(marker), parent_pid=os.getpid())
+    dead = runner.run_cells(always, grid, options(kitti_root, results), parallel=Parallel(workers=2))
+    assert [o.status for o in dead] == ["failed"] * 3 and all("died" in o.message for o in dead)
+    assert not list(results.rglob("*")) or not list(results.rglob("*.json"))  # nothing partial
+    marker.unlink()
+    rerun = runner.run_cells(always, grid, options(kitti_root, results), parallel=Parallel(workers=2))
+    assert [o.status for o in rerun] == ["computed"] * 3
+
+    # one worker dies: the pool breaks, the cells it took down are rerun one by one and complete
+    marker.write_text("")
+    once = KillOnMarker(marker=str(marker), parent_pid=os.getpid(), once=True)
+    survived = runner.run_cells(once, grid, options(kitti_root, tmp_path / "once"), parallel=Parallel(workers=2))
+    assert not marker.exists() and [o.status for o in survived] == ["computed"] * 3
+
+
+def test_run_jobs_reports_errors_per_job():
+    results = run_jobs(int, [("1",), ("x",), ("3",)], Parallel(workers=2))
+    assert [r.value for r in results] == [1, None, 3]
+    assert results[1].error is not None and "invalid literal" in results[1].error
+    with pytest.raises(ConfigError, match="workers"):
+        Parallel(workers=0)
+    with pytest.raises(ConfigError, match="not both"):
+        Parallel(workers=2, ray_address="auto")
+
+
+def test_chunked_map_building_gives_the_serial_maps(kitti_root, safl_home):
+    source = kitti_source(kitti_root)
+    frames = select_frames(len(source.sequence("00")), 1)
+    conds = [CLEAN, Condition(5.0, 1.0)]
+    serial = mapcache.prepare(source, "00", MapConfig(size=32), frames=frames, conditions=conds, seed=0,
+                              kinds=("topview", "points"), progress=False)
+    expected = {key: mapcache._load(path, key[1]) for key, path in serial.items()}
+    for path in serial.values():
+        path.unlink()
+    chunked = mapcache.prepare(source, "00", MapConfig(size=32), frames=frames, conditions=conds, seed=0,
+                               kinds=("topview", "points"), progress=False, parallel=Parallel(workers=2))
+    for key, path in chunked.items():
+        got = mapcache._load(path, key[1])
+        if key[1] == "topview":
+            assert (got == expected[key]).all(), key
+        else:
+            assert all((a == b).all() for a, b in zip(got, expected[key], strict=True)), key
+
+
+def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_path):
+    """A local Ray cluster started here (2 CPUs). Mid-cell worker deaths with records are tested
+    with local workers above; here a Ray worker that dies (a segfault) fails its own job only,
+    and the cluster then runs the grid to the serial run's records."""
+    ray = pytest.importorskip("ray")
+    import ctypes
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+             runtime_env={"env_vars": {"SAFL_HOME": str(safl_home)}})
+    try:
+        crashed = run_jobs(ctypes.string_at, [(0,)], Parallel(ray_address="auto"))
+        assert crashed[0].value is None and "died" in (crashed[0].error or "")
+        sad = make_method("sad")
+        serial = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "serial"))
+        par = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "ray"), parallel=Parallel(ray_address="auto"))
+        assert _results(serial) == _results(par)
+        assert "Ray cluster (auto)" in par[0].record.timings.how_run  # type: ignore[union-attr]
+    finally:
+        ray.shutdown()
+
+
+def test_cli_workers_and_bad_values(grid, kitti_root, tmp_path, capsys):
+    argv = ["run", "--method", "sad", "--task", grid[0], "--kitti-root", str(kitti_root),
+            "--results", str(tmp_path), "--quiet"]
+    assert main([*argv, "--workers", "2"]) == 0
+    assert "computed" in capsys.readouterr().out
+    assert main([*argv, "--workers", "0"]) == 2
+    assert main([*argv, "--workers", "2", "--ray", "auto"]) == 2
+    assert "not both" in capsys.readouterr().err
