@@ -2,7 +2,7 @@
 Ray path against local workers (issue 8). Uses the embedded default's sequence 09 (generated on
 first use) with a throw-away map cache.
 
-    python tests/bench_parallel.py
+    python tests/bench_parallel.py [SEQUENCE]      # default 09; 00 is the larger job
 
 Not a timed test: the default test run skips benchmarks (it has no test functions).
 """
@@ -15,10 +15,13 @@ import time
 
 
 def main() -> int:
+    import sys
+
     from safl_bench import synth
 
+    name = sys.argv[1] if len(sys.argv) > 1 else "09"
     root = synth.default_root()
-    synth.ensure(root, ["09"], progress=False)  # before SAFL_HOME moves to the scratch cache
+    synth.ensure(root, [name], progress=False)  # before SAFL_HOME moves to the scratch cache
     with tempfile.TemporaryDirectory() as scratch:
         os.environ["SAFL_HOME"] = scratch
         from safl_bench import mapcache, runner
@@ -31,25 +34,23 @@ def main() -> int:
         from safl_bench.tasks import register, unregister
 
         source = kitti_source(root)
-        frames = select_frames(len(source.sequence("09")), 4)
+        frames = select_frames(len(source.sequence(name)), 4)
         conds = [CLEAN, *PAPER_CONDITIONS]
         seconds = {}
         for workers in (1, 2):
-            for path in mapcache.prepare(source, "09", MapConfig(), frames=frames, conditions=[], seed=0).values():
-                path.unlink()
             for f in (mapcache.map_cache_dir()).rglob("*.npz"):
                 f.unlink()
             t0 = time.perf_counter()
-            mapcache.prepare(source, "09", MapConfig(), frames=frames, conditions=conds, seed=0,
+            mapcache.prepare(source, name, MapConfig(), frames=frames, conditions=conds, seed=0,
                              progress=False, parallel=Parallel(workers=workers))
             seconds[workers] = time.perf_counter() - t0
-        print(f"map building, sequence 09, {len(frames)} frames x {len(conds)} conditions: "
+        print(f"map building, sequence {name}, {len(frames)} frames x {len(conds)} conditions: "
               f"1 worker {seconds[1]:.1f} s, 2 workers {seconds[2]:.1f} s -> speed-up {seconds[1] / seconds[2]:.2f}x")
 
         os.environ["SAFL_KITTI_ROOT"] = str(root)
-        ids = [f"Bench/Par09-{c.name}-v0" for c in PAPER_CONDITIONS]
+        ids = [f"Bench/Par{name}-{c.name}-v0" for c in PAPER_CONDITIONS]
         for task_id, c in zip(ids, PAPER_CONDITIONS, strict=True):
-            register(task_id, source="kitti", sequence="09", condition=c, step=4)
+            register(task_id, source="kitti", sequence=name, condition=c, step=4)
         sad = make_method("sad")
         per_cell = {}
         import ray
