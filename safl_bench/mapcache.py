@@ -127,8 +127,18 @@ def prepare(
             views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
         else:
             views = _build_chunked(source, sequence, config, frames, offsets, todo_kinds, parallel, progress)
-        for c, k in missing:
+        def save(ck: tuple[Condition, str]) -> None:
+            c, k = ck
             _save(paths[c, k], views[c.name, k], _meta(source, sequence, config, frames, c, seed, k))
+
+        if parallel is None or parallel.serial:
+            for ck in missing:
+                save(ck)
+        else:  # compression releases the GIL: write the files on as many threads as workers
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(max_workers=parallel.slots()) as pool:
+                list(pool.map(save, missing))
     return paths
 
 

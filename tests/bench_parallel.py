@@ -2,7 +2,7 @@
 Ray path against local workers (issue 8). Uses the embedded default's sequence 09 (generated on
 first use) with a throw-away map cache.
 
-    python tests/bench_parallel.py [SEQUENCE]      # default 09; 00 is the larger job
+    python tests/bench_parallel.py [SEQUENCE [STEP]]   # default 09 and every 4th frame
 
 Not a timed test: the default test run skips benchmarks (it has no test functions).
 """
@@ -20,6 +20,7 @@ def main() -> int:
     from safl_bench import synth
 
     name = sys.argv[1] if len(sys.argv) > 1 else "09"
+    step = int(sys.argv[2]) if len(sys.argv) > 2 else 4
     root = synth.default_root()
     synth.ensure(root, [name], progress=False)  # before SAFL_HOME moves to the scratch cache
     with tempfile.TemporaryDirectory() as scratch:
@@ -34,7 +35,7 @@ def main() -> int:
         from safl_bench.tasks import register, unregister
 
         source = kitti_source(root)
-        frames = select_frames(len(source.sequence(name)), 4)
+        frames = select_frames(len(source.sequence(name)), step)
         conds = [CLEAN, *PAPER_CONDITIONS]
         seconds = {}
         for workers in (1, 2):
