@@ -110,7 +110,8 @@ def _run_local(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]], workers:
 
     context = multiprocessing.get_context("spawn")
     broken: list[int] = []
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context)
+    try:
         futures = {pool.submit(fn, *job): i for i, job in enumerate(jobs)}
         for future in as_completed(futures):
             i = futures[future]
@@ -121,6 +122,10 @@ def _run_local(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]], workers:
                 done(i, JobResult(error=_message(exc)))
             else:
                 done(i, JobResult(future.result()))
+    except BaseException:  # e.g. Ctrl-C: do not wait for the queued jobs
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
     for i in sorted(broken):  # alone, so that a job that kills its worker fails by itself
         with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
             future = pool.submit(fn, *jobs[i])

@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 from parallel_methods import KillOnMarker
+from test_runner import options, register_tiny
 
-from safl_bench import mapcache, runner, tasks
+from safl_bench import mapcache, runner
 from safl_bench.cli import main
 from safl_bench.datasource import kitti_source
 from safl_bench.errors import ConfigError
@@ -27,17 +28,7 @@ TASKS = ("Test/ParA-T1R1-v0", "Test/ParA-T5R1-v0", "Test/ParA-T1R2-v0")
 
 @pytest.fixture
 def grid(kitti_root: Path, safl_home: Path) -> Iterator[tuple[str, ...]]:
-    for task_id in TASKS:
-        tasks.register(task_id, source="kitti", sequence="00", condition=task_id.split("-")[1],
-                       step=1, map_config=MapConfig(size=32))
-    yield TASKS
-    for task_id in TASKS:
-        tasks.unregister(task_id)
-
-
-def options(kitti_root: Path, results: Path, **kw: object) -> runner.RunOptions:
-    return runner.RunOptions(results_dir=results, kitti_root=str(kitti_root), progress=False,
-                             timing_frames=3, timing_repeats=2, **kw)  # type: ignore[arg-type]
+    yield from register_tiny(TASKS)
 
 
 def _results(outcomes: list[runner.CellOutcome]) -> dict[str, object]:

@@ -17,15 +17,19 @@ from safl_bench.records import load_record
 TASKS = ("Test/TinyRun-T1R1-v0", "Test/TinyRun-T5R1-v0")
 
 
+def register_tiny(ids: tuple[str, ...]) -> Iterator[tuple[str, ...]]:
+    """Register paper tasks on the tiny KITTI fixture (condition from the id), yield, unregister."""
+    for task_id in ids:
+        tasks.register(task_id, source="kitti", sequence="00", condition=task_id.split("-")[1],
+                       step=1, map_config=MapConfig(size=32))
+    yield ids
+    for task_id in ids:
+        tasks.unregister(task_id)
+
+
 @pytest.fixture
 def tiny_tasks(kitti_root: Path, safl_home: Path) -> Iterator[tuple[str, ...]]:
-    for task_id in TASKS:
-        condition = task_id.split("-")[1]
-        tasks.register(task_id, source="kitti", sequence="00", condition=condition, step=1,
-                       map_config=MapConfig(size=32))
-    yield TASKS
-    for task_id in TASKS:
-        tasks.unregister(task_id)
+    yield from register_tiny(TASKS)
 
 
 def options(kitti_root: Path, results: Path, **kw: object) -> runner.RunOptions:
