@@ -127,6 +127,7 @@ def prepare(
             views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
         else:
             views = _build_chunked(source, sequence, config, frames, offsets, todo_kinds, parallel, progress)
+
         def save(ck: tuple[Condition, str]) -> None:
             c, k = ck
             _save(paths[c, k], views[c.name, k], _meta(source, sequence, config, frames, c, seed, k))

@@ -104,8 +104,8 @@ def _same_run(old: ResultRecord, method: MethodInfo, task_fp: str, matcher: dict
 
 def _existing(
     method: Method, task_id: str, options: RunOptions, log: Callable[[str], None]
-) -> tuple[int, Path, CellOutcome | None]:
-    """(seed, record path, the reused outcome or None when the cell must be computed)."""
+) -> tuple[int, CellOutcome | None]:
+    """(seed, the reused outcome or None when the cell must be computed)."""
     registered = spec(task_id)
     seed = registered.seed if options.seed is None else int(options.seed)
     info = method_info(method)
@@ -118,9 +118,9 @@ def _existing(
         else:
             why = _same_run(old, info, registered.fingerprint, options.evaluation.to_dict())
             if not why:
-                return seed, path, CellOutcome(registered.id, seed, "reused", path, old)
+                return seed, CellOutcome(registered.id, seed, "reused", path, old)
             log(f"note: {path} was made with other settings ({why}); recomputing it")
-    return seed, path, None
+    return seed, None
 
 
 def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool) -> Task:
@@ -144,7 +144,10 @@ def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunO
     """Render (or read) the views, describe, match and score one cell; no timing, no record.
     Runs in this process or on a worker (which gets the task's spec, not its id: tasks
     registered at run time exist only in this process)."""
-    task = _task(registered, seed, options, progress)
+    return _evaluate(method, _task(registered, seed, options, progress), options)
+
+
+def _evaluate(method: Method, task: Task, options: RunOptions) -> CellEvaluation:
     kind = method.input_kind
     task.prepare([kind])
     evaluation = evaluate_method(
@@ -161,11 +164,14 @@ def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunO
 
 
 def finish_cell(method: Method, task_id: str, seed: int, options: RunOptions,
-                evaluation: CellEvaluation, how_run: str) -> CellOutcome:
+                evaluation: CellEvaluation, how_run: str, task: Task | None = None) -> CellOutcome:
     """Time the method at batch 1 on the cell's queries (in this process, nothing else of the
-    run competing for the cores) and write the record atomically."""
+    run competing for the cores) and write the record atomically. `task`: the cell's task if
+    this process already has it (its views are loaded), else it is opened again."""
     registered = spec(task_id)
-    queries = _task(registered, seed, options, progress=False).queries(method.input_kind)
+    if task is None:
+        task = _task(registered, seed, options, progress=False)
+    queries = task.queries(method.input_kind)
     batch1 = time_describe(
         method, queries, batch_size=1, frames=options.timing_frames,
         repeats=options.timing_repeats, warmup=1,
@@ -203,11 +209,12 @@ def run_cell(
     log: Callable[[str], None] = print,
 ) -> CellOutcome:
     """Evaluate `method` on one task and seed in this process; write (or reuse) its record."""
-    seed, _, reused = _existing(method, task_id, options, log)
+    seed, reused = _existing(method, task_id, options, log)
     if reused is not None:
         return reused
-    evaluation = evaluate_cell(method, spec(task_id), seed, options, progress=options.progress)
-    return finish_cell(method, task_id, seed, options, evaluation, HOW_RUN)
+    task = _task(spec(task_id), seed, options, options.progress)
+    evaluation = _evaluate(method, task, options)
+    return finish_cell(method, task_id, seed, options, evaluation, HOW_RUN, task)
 
 
 def run_cells(
@@ -255,7 +262,7 @@ def run_cells(
     todo: list[tuple[str, int]] = []
     for task_id in task_ids:
         try:
-            seed, _, reused = _existing(method, task_id, options, say)
+            seed, reused = _existing(method, task_id, options, say)
         except SaflError as exc:
             by_task[task_id] = failed(task_id, str(exc))
             continue

@@ -73,11 +73,11 @@ def validation_callback(task_ids: list[str], source_label: str, kitti_root: str 
     The log keys are what the leaderboard's training-stability figure reads.
     """
     from safl_bench.evaluation import evaluate_method
-    from safl_bench.tasks.registry import make, spec
+    from safl_bench.tasks.registry import make
 
     tasks = []
     for task_id in task_ids:
-        task = make(spec(task_id).id, kitti_root=kitti_root, progress=progress)
+        task = make(task_id, kitti_root=kitti_root, progress=progress)
         task.prepare(["topview"])
         tasks.append(task)
 
