@@ -7,15 +7,22 @@ matters for noisy conditions, so clean views are shared by all seeds. Files live
     topview-<condition>-<key>.npz   maps (F, size, size) float32, meta (JSON)
     points-<condition>-<key>.npz    points (sum M_i, 3) float32, offsets (F + 1,) int64, meta
 
+A file written by a parallel `prepare` holds, instead of those arrays, the compressed chunks the
+workers made, in frame order, as members part-0000.npz, part-0001.npz, ... (each a compressed
+`.npz` of the arrays above for its frames) beside `meta`; it loads to the same views.
+
 Tasks call `load_views`; `prepare` renders many conditions and kinds in one pass over the scans.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
+import zipfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -66,23 +73,62 @@ def _meta(source: DataSource, sequence: str, config: MapConfig, frames: np.ndarr
     }), sort_keys=True)
 
 
+def _write_views(target: Path | io.BytesIO, views: np.ndarray | list[np.ndarray], meta: str | None) -> None:
+    """The compressed `.npz` of one set of views (and `meta`, if given)."""
+    arrays: dict[str, Any] = {}
+    if isinstance(views, np.ndarray):
+        arrays["maps"] = views.astype(np.float32)
+    else:
+        lengths = np.array([len(v) for v in views], dtype=np.int64)
+        arrays["points"] = np.concatenate(views).astype(np.float32) if views else np.zeros((0, 3), np.float32)
+        arrays["offsets"] = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    if meta is not None:
+        arrays["meta"] = np.array(meta)
+    np.savez_compressed(target, **arrays)
+
+
 def _save(path: Path, views: np.ndarray | list[np.ndarray], meta: str) -> None:
     with atomic_path(path) as tmp:
-        if isinstance(views, np.ndarray):
-            np.savez_compressed(tmp, maps=views.astype(np.float32), meta=np.array(meta))
-        else:
-            lengths = np.array([len(v) for v in views], dtype=np.int64)
-            offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-            points = np.concatenate(views).astype(np.float32) if views else np.zeros((0, 3), np.float32)
-            np.savez_compressed(tmp, points=points, offsets=offsets, meta=np.array(meta))
+        _write_views(tmp, views, meta)
+
+
+def _compress(views: np.ndarray | list[np.ndarray]) -> bytes:
+    """One chunk's views as compressed `.npz` bytes (made on a worker, joined by `_save_parts`)."""
+    buffer = io.BytesIO()
+    _write_views(buffer, views, None)
+    return buffer.getvalue()
+
+
+def _save_parts(path: Path, parts: Sequence[bytes], meta: str) -> None:
+    """The cache file of views that workers compressed chunk by chunk: the chunks are stored as
+    they are (no second compression), in frame order."""
+    with atomic_path(path) as tmp:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as archive:
+            with archive.open("meta.npy", "w") as fh:
+                np.lib.format.write_array(fh, np.array(meta))
+            for i, part in enumerate(parts):
+                archive.writestr(f"part-{i:04d}.npz", part)
+
+
+def _views(data: np.lib.npyio.NpzFile, kind: str) -> np.ndarray | list[np.ndarray]:
+    if kind == "topview":
+        return np.asarray(data["maps"], dtype=np.float32)
+    points, offsets = data["points"], data["offsets"]
+    return [points[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
 
 
 def _load(path: Path, kind: str) -> np.ndarray | list[np.ndarray]:
     with np.load(path) as data:
-        if kind == "topview":
-            return np.asarray(data["maps"], dtype=np.float32)
-        points, offsets = data["points"], data["offsets"]
-        return [points[offsets[i] : offsets[i + 1]] for i in range(len(offsets) - 1)]
+        parts = sorted(name for name in data.files if name.startswith("part-"))
+        if not parts:
+            return _views(data, kind)
+        chunks = []
+        for name in parts:
+            with np.load(io.BytesIO(data[name])) as part:
+                chunks.append(_views(part, kind))
+    if kind == "topview":
+        return np.concatenate(chunks)
+    return [view for chunk in chunks for view in chunk]
 
 
 def _check_kind(kind: str) -> None:
@@ -106,9 +152,9 @@ def prepare(
     one pass over the scans. Returns {(condition, kind): cache file}.
 
     With `parallel` (local workers or Ray) the frames are split into contiguous chunks rendered
-    on the workers, each from a fresh local map of the `window` scans before its first frame
-    (the map at a frame depends only on those scans, so the views are the serial ones); this
-    process joins the chunks and writes the cache files."""
+    and compressed on the workers, each from a fresh local map of the `window` scans before its
+    first frame (the map at a frame depends only on those scans, so the views are the serial
+    ones); this process stores the compressed chunks in the cache files."""
     sequence = str(sequence)
     conds = list(dict.fromkeys(conditions))
     for kind in kinds:
@@ -123,38 +169,33 @@ def prepare(
         offsets = {
             c.name: None if c.is_clean else sample_offsets(len(frames), c, seed) for c in todo_conds
         }
+        meta = {ck: _meta(source, sequence, config, frames, ck[0], seed, ck[1]) for ck in missing}
         if parallel is None or parallel.serial or len(frames) < 2:
             views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
+            for c, k in missing:
+                _save(paths[c, k], views[c.name, k], meta[c, k])
         else:
-            views = _build_chunked(source, sequence, config, frames, offsets, todo_kinds, parallel, progress)
-
-        def save(ck: tuple[Condition, str]) -> None:
-            c, k = ck
-            _save(paths[c, k], views[c.name, k], _meta(source, sequence, config, frames, c, seed, k))
-
-        if parallel is None or parallel.serial:
-            for ck in missing:
-                save(ck)
-        else:  # compression releases the GIL: write the files on as many threads as workers
-            from concurrent.futures import ThreadPoolExecutor
-
-            with ThreadPoolExecutor(max_workers=parallel.slots()) as pool:
-                list(pool.map(save, missing))
+            parts = _build_chunked(source, sequence, config, frames, offsets, todo_kinds, parallel, progress)
+            for c, k in missing:
+                _save_parts(paths[c, k], parts[c.name, k], meta[c, k])
     return paths
 
 
 def _build_chunk(
     source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
     offsets: dict[str, np.ndarray | None], kinds: Sequence[str],
-) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
-    """One chunk of `prepare`'s views (runs on a worker)."""
-    return build_views(source.sequence(sequence), config, frames, offsets, kinds, progress=False)
+) -> dict[tuple[str, str], bytes]:
+    """One chunk of `prepare`'s views, compressed (runs on a worker: the compression, as costly
+    as the rendering, is spread over the workers, and only compressed bytes travel back)."""
+    views = build_views(source.sequence(sequence), config, frames, offsets, kinds, progress=False)
+    return {key: _compress(value) for key, value in views.items()}
 
 
 def _build_chunked(
     source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
     offsets: dict[str, np.ndarray | None], kinds: Sequence[str], parallel: Parallel, progress: bool,
-) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
+) -> dict[tuple[str, str], list[bytes]]:
+    """{(label, kind): the compressed chunks in frame order}, rendered on the workers."""
     from tqdm import tqdm
 
     chunks = [c for c in np.array_split(np.arange(len(frames)), min(len(frames), 2 * parallel.slots())) if len(c)]
@@ -170,11 +211,7 @@ def _build_chunked(
     errors = [r.error for r in results if r.error is not None]
     if errors:
         raise DataError(f"building the maps of sequence {sequence} failed on a worker: {errors[0]}")
-    views: dict[tuple[str, str], np.ndarray | list[np.ndarray]] = {}
-    for key in results[0].value:
-        parts = [r.value[key] for r in results]
-        views[key] = np.concatenate(parts) if key[1] == "topview" else [v for part in parts for v in part]
-    return views
+    return {key: [r.value[key] for r in results] for key in results[0].value}
 
 
 def load_views(

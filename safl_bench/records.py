@@ -433,6 +433,59 @@ def load_records(results_dir: str | os.PathLike[str]) -> tuple[list[ResultRecord
 
 
 # --------------------------------------------------------------------------------------------
+# Cells evaluated but not yet timed
+
+#: Suffix of an evaluated cell's file beside its record's path (not a record: `load_records`
+#: reads only seed-*.json).
+EVALUATED_SUFFIX = ".evaluated"
+
+
+@dataclass(frozen=True)
+class EvaluatedCell:
+    """A record's content before its timings: what a worker computed for one cell. A parallel
+    run keeps it on disk until the cell is timed, so an interrupted run does not evaluate the
+    cell again."""
+
+    method: MethodInfo
+    task: TaskInfo
+    seed: int
+    matcher: dict[str, Any]
+    results: dict[str, ModeResult]
+    describe_frames_per_s: float  # batched throughput measured while evaluating
+    matcher_s: float
+    evaluated_on: str  # "this process", "2 local worker processes", "Ray cluster (auto)"
+
+
+def evaluated_path(
+    results_dir: str | os.PathLike[str], method: str, version: str | int, task_id: str, seed: int
+) -> Path:
+    """Where the evaluated-but-untimed cell (method@version, task, seed) is kept."""
+    path = record_path(results_dir, method, version, task_id, seed)
+    return path.with_name(path.name + EVALUATED_SUFFIX)
+
+
+def write_evaluated(results_dir: str | os.PathLike[str], cell: EvaluatedCell) -> Path:
+    """Write `cell` atomically beside its future record; returns the path."""
+    path = evaluated_path(results_dir, cell.method.name, cell.method.version, cell.task.id, cell.seed)
+    data = dict(to_jsonable(cell))
+    _parse_evaluated(_Reader(path), data)  # refuse to write what could not be read back
+    atomic_write_text(path, dumps_record(data))
+    return path
+
+
+def load_evaluated(path: str | os.PathLike[str]) -> EvaluatedCell:
+    """Read and validate an evaluated cell. Raises CorruptRecordError naming the file."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"), parse_constant=_reject_constant)
+    except FileNotFoundError:
+        raise DataError(f"evaluated cell {p} does not exist") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise CorruptRecordError(p, f"cannot be read as JSON ({exc})") from None
+    return _parse_evaluated(_Reader(p), data)
+
+
+# --------------------------------------------------------------------------------------------
 # Validation
 
 
@@ -614,14 +667,7 @@ def _parse_record(r: _Reader, data: Any) -> ResultRecord:
     schema = r.get(d, "schema", "", r.int_)
     if schema != SCHEMA_VERSION:
         raise r.fail("schema", f"version {schema} is not the supported {SCHEMA_VERSION}")
-    raw_results = r.get(d, "results", "", r.dict_)
-    if not raw_results:
-        raise r.fail("results", "holds no matching mode")
-    results = {}
-    for mode in sorted(raw_results):
-        if mode not in MODES:
-            raise r.fail(f"results.{mode}", f"unknown matching mode (known: {', '.join(MODES)})")
-        results[mode] = _parse_mode(r, raw_results[mode], f"results.{mode}")
+    results = _parse_results(r, d)
     created = r.get(d, "created", "", r.nonempty_str)
     try:
         datetime.fromisoformat(created)
@@ -638,3 +684,30 @@ def _parse_record(r: _Reader, data: Any) -> ResultRecord:
         created=created,
         schema=schema,
     )
+
+
+def _parse_results(r: _Reader, d: dict[str, Any]) -> dict[str, ModeResult]:
+    raw_results = r.get(d, "results", "", r.dict_)
+    if not raw_results:
+        raise r.fail("results", "holds no matching mode")
+    results = {}
+    for mode in sorted(raw_results):
+        if mode not in MODES:
+            raise r.fail(f"results.{mode}", f"unknown matching mode (known: {', '.join(MODES)})")
+        results[mode] = _parse_mode(r, raw_results[mode], f"results.{mode}")
+    return results
+
+
+def _parse_evaluated(r: _Reader, data: Any) -> EvaluatedCell:
+    d = r.obj(data, "")
+    return EvaluatedCell(
+        method=_parse_method(r, r.get(d, "method", "", lambda v, w: v)),
+        task=_parse_task(r, r.get(d, "task", "", lambda v, w: v)),
+        seed=r.get(d, "seed", "", r.int_),
+        matcher=r.get(d, "matcher", "", r.dict_),
+        results=_parse_results(r, d),
+        describe_frames_per_s=r.get(d, "describe_frames_per_s", "", r.float_),
+        matcher_s=r.get(d, "matcher_s", "", r.float_),
+        evaluated_on=r.get(d, "evaluated_on", "", r.nonempty_str),
+    )
+

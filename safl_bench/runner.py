@@ -22,26 +22,28 @@ from typing import Any
 from safl_bench.errors import SaflError
 from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method
 from safl_bench.method import Method
-from safl_bench.parallel import Parallel, run_jobs
+from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.records import (
     CorruptRecordError,
+    EvaluatedCell,
     MethodInfo,
     ResultRecord,
+    TaskInfo,
     Timings,
+    evaluated_path,
+    load_evaluated,
     load_record,
     mode_result_from_evaluation,
     new_record,
     record_path,
     task_info,
+    write_evaluated,
     write_record,
 )
 from safl_bench.tasks import registry, spec, suite
 from safl_bench.tasks.spec import TaskSpec
 from safl_bench.tasks.task import Task
-from safl_bench.timing import time_describe
-
-#: How timing figures are taken in a serial run (parallel runs say where the cells ran).
-HOW_RUN = "sequential, one cell at a time in one process"
+from safl_bench.timing import pinned, time_describe
 
 
 @dataclass(frozen=True)
@@ -91,35 +93,51 @@ def method_info(method: Method) -> MethodInfo:
     return MethodInfo(name=method.name, version=str(method.version), params=params)
 
 
-def _same_run(old: ResultRecord, method: MethodInfo, task_fp: str, matcher: dict[str, Any]) -> str:
-    """Why an existing record does not hold this run ('' when it does)."""
-    if old.method.params != method.params:
+def _same_run(method: MethodInfo, task: TaskInfo, matcher: dict[str, Any], want_method: MethodInfo,
+              task_fp: str, want_matcher: dict[str, Any]) -> str:
+    """Why an existing record (or evaluated cell) does not hold this run ('' when it does)."""
+    if method.params != want_method.params:
         return "method settings differ"
-    if old.task.spec_fingerprint != task_fp:
+    if task.spec_fingerprint != task_fp:
         return "task definition differs"
-    if old.matcher != matcher:
+    if matcher != want_matcher:
         return "matcher settings differ"
     return ""
 
 
 def _existing(
     method: Method, task_id: str, options: RunOptions, log: Callable[[str], None]
-) -> tuple[int, CellOutcome | None]:
-    """(seed, the reused outcome or None when the cell must be computed)."""
+) -> tuple[int, CellOutcome | EvaluatedCell | None]:
+    """(seed, what already exists of the cell): its reusable record as an outcome, or the
+    evaluation an interrupted parallel run left untimed, or None when it must be computed."""
     registered = spec(task_id)
     seed = registered.seed if options.seed is None else int(options.seed)
     info = method_info(method)
     path = record_path(options.results_dir, info.name, info.version, registered.id, seed)
-    if path.is_file() and not options.force:
+    if options.force:
+        return seed, None
+    matcher = options.evaluation.to_dict()
+    if path.is_file():
         try:
             old = load_record(path)
         except CorruptRecordError as exc:
             log(f"warning: {exc}; recomputing it")
         else:
-            why = _same_run(old, info, registered.fingerprint, options.evaluation.to_dict())
+            why = _same_run(old.method, old.task, old.matcher, info, registered.fingerprint, matcher)
             if not why:
                 return seed, CellOutcome(registered.id, seed, "reused", path, old)
             log(f"note: {path} was made with other settings ({why}); recomputing it")
+    pending = evaluated_path(options.results_dir, info.name, info.version, registered.id, seed)
+    if pending.is_file():
+        try:
+            cell = load_evaluated(pending)
+        except CorruptRecordError as exc:
+            log(f"warning: {exc}; evaluating the cell again")
+        else:
+            if cell.seed == seed and not _same_run(
+                cell.method, cell.task, cell.matcher, info, registered.fingerprint, matcher
+            ):
+                return seed, cell
     return seed, None
 
 
@@ -128,77 +146,76 @@ def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool) 
     return Task.from_spec(run_spec, kitti_root=options.kitti_root, progress=progress)
 
 
-@dataclass
-class CellEvaluation:
-    """What evaluating a cell produced, before timing (picklable: it comes back from workers)."""
-
-    results: dict[str, Any]  # mode -> ModeResult
-    describe_frames_per_s: float
-    matcher_s: float
-    data: dict[str, Any]  # Task.info()
-    source_label: str
-
-
 def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunOptions,
-                  progress: bool = True) -> CellEvaluation:
+                  progress: bool = True, where: str = "this process") -> EvaluatedCell:
     """Render (or read) the views, describe, match and score one cell; no timing, no record.
     Runs in this process or on a worker (which gets the task's spec, not its id: tasks
     registered at run time exist only in this process)."""
-    return _evaluate(method, _task(registered, seed, options, progress), options)
+    return _evaluate(method, registered, _task(registered, seed, options, progress), options, where)
 
 
-def _evaluate(method: Method, task: Task, options: RunOptions) -> CellEvaluation:
+def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOptions,
+              where: str) -> EvaluatedCell:
     kind = method.input_kind
     task.prepare([kind])
     evaluation = evaluate_method(
         method, task.queries(kind), task.database(kind), task.truth,
         config=options.evaluation, revisit=task.spec.protocol == "revisit",
     )
-    return CellEvaluation(
+    data = task.info()
+    return EvaluatedCell(
+        method=method_info(method),
+        task=task_info(
+            registered, task.source.label if task.source is not None else task.spec.source,
+            data_fingerprint=data.get("data_fingerprint"),
+            n_queries=data["n_queries"], n_database=data["n_database"],
+        ),
+        seed=task.spec.seed,
+        matcher=options.evaluation.to_dict(),
         results={m: mode_result_from_evaluation(evaluation.metrics[m]) for m in MODES},
         describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
         matcher_s=evaluation.matcher_s,
-        data=task.info(),
-        source_label=task.source.label if task.source is not None else task.spec.source,
+        evaluated_on=where,
     )
 
 
-def finish_cell(method: Method, task_id: str, seed: int, options: RunOptions,
-                evaluation: CellEvaluation, how_run: str, task: Task | None = None) -> CellOutcome:
-    """Time the method at batch 1 on the cell's queries (in this process, nothing else of the
-    run competing for the cores) and write the record atomically. `task`: the cell's task if
-    this process already has it (its views are loaded), else it is opened again."""
-    registered = spec(task_id)
+def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
+                task: Task | None = None) -> CellOutcome:
+    """Time the method at batch 1 on the cell's queries (in this process, pinned to fixed CPUs,
+    nothing else of the run competing for them), write the record atomically and drop the
+    cell's evaluated file if a parallel run left one. `task`: the cell's task if this process
+    already has it (its views are loaded), else it is opened again."""
     if task is None:
-        task = _task(registered, seed, options, progress=False)
+        task = _task(spec(cell.task.id), cell.seed, options, progress=False)
     queries = task.queries(method.input_kind)
-    batch1 = time_describe(
-        method, queries, batch_size=1, frames=options.timing_frames,
-        repeats=options.timing_repeats, warmup=1,
+    with pinned() as how_pinned:
+        batch1 = time_describe(
+            method, queries, batch_size=1, frames=options.timing_frames,
+            repeats=options.timing_repeats, warmup=1,
+        )
+    where = cell.evaluated_on
+    how_run = (
+        f"sequential, one cell at a time in one process; timing {how_pinned}"
+        if where == "this process"
+        else f"evaluated on {where}; timed afterwards in the main process, one cell at a time, "
+        f"{how_pinned}"
     )
     timings = Timings(
         describe_ms_per_frame=batch1.per_item_ms,
-        describe_frames_per_s=evaluation.describe_frames_per_s,
-        matcher_s=evaluation.matcher_s,
+        describe_frames_per_s=cell.describe_frames_per_s,
+        matcher_s=cell.matcher_s,
         peak_memory_mb=batch1.peak_rss_mb,
         repeats=options.timing_repeats,
         how_run=how_run,
     )
-    data = evaluation.data
     record = new_record(
-        method=method_info(method),
-        task=task_info(
-            registered, evaluation.source_label,
-            data_fingerprint=data.get("data_fingerprint"),
-            n_queries=data["n_queries"], n_database=data["n_database"],
-        ),
-        seed=seed,
-        matcher=options.evaluation.to_dict(),
-        results=evaluation.results,
-        timings=timings,
+        method=cell.method, task=cell.task, seed=cell.seed, matcher=cell.matcher,
+        results=cell.results, timings=timings,
     )
     written = write_record(options.results_dir, record)
-    return CellOutcome(registered.id, seed, "computed", written, record)
+    evaluated_path(options.results_dir, cell.method.name, cell.method.version, cell.task.id,
+                   cell.seed).unlink(missing_ok=True)
+    return CellOutcome(cell.task.id, cell.seed, "computed", written, record)
 
 
 def run_cell(
@@ -209,12 +226,14 @@ def run_cell(
     log: Callable[[str], None] = print,
 ) -> CellOutcome:
     """Evaluate `method` on one task and seed in this process; write (or reuse) its record."""
-    seed, reused = _existing(method, task_id, options, log)
-    if reused is not None:
-        return reused
-    task = _task(spec(task_id), seed, options, options.progress)
-    evaluation = _evaluate(method, task, options)
-    return finish_cell(method, task_id, seed, options, evaluation, HOW_RUN, task)
+    seed, existing = _existing(method, task_id, options, log)
+    if isinstance(existing, CellOutcome):
+        return existing
+    if isinstance(existing, EvaluatedCell):  # an interrupted parallel run evaluated it
+        return finish_cell(method, options, existing)
+    registered = spec(task_id)
+    task = _task(registered, seed, options, options.progress)
+    return finish_cell(method, options, _evaluate(method, registered, task, options, "this process"), task)
 
 
 def run_cells(
@@ -229,9 +248,10 @@ def run_cells(
     go on.
 
     Serially (the default) each cell is evaluated, timed and written in turn. With `parallel`
-    (local workers or Ray) the cells are evaluated on the workers, then timed and written one
-    by one in this process once every worker has finished, so that no timing is taken while
-    workers compete for the cores; only this process writes records.
+    (local workers or Ray) the cells are evaluated on the workers, and each evaluation is kept
+    on disk as it comes back (an interrupted run resumes from them); once every worker has
+    finished, this process times the cells one by one, pinned, and writes the records: no
+    timing is taken while workers compete for the cores, and only this process writes files.
     """
     from tqdm import tqdm
 
@@ -259,33 +279,49 @@ def run_cells(
         return outcomes
 
     by_task: dict[str, CellOutcome] = {}
+    evaluated: dict[str, EvaluatedCell] = {}
     todo: list[tuple[str, int]] = []
     for task_id in task_ids:
         try:
-            seed, reused = _existing(method, task_id, options, say)
+            seed, existing = _existing(method, task_id, options, say)
         except SaflError as exc:
             by_task[task_id] = failed(task_id, str(exc))
             continue
-        if reused is not None:
-            by_task[task_id] = reused
+        if isinstance(existing, CellOutcome):
+            by_task[task_id] = existing
+        elif isinstance(existing, EvaluatedCell):
+            evaluated[task_id] = existing
         else:
             todo.append((task_id, seed))
-    how = f"evaluated on {parallel.describe()}; timed afterwards, sequentially, in the main process"
-    bar = tqdm(total=len(todo), desc=f"{method.name} ({parallel.describe()})", unit="task",
+    if evaluated:
+        say(f"note: {len(evaluated)} cell(s) evaluated by an interrupted run are timed, not "
+            "evaluated again")
+    where = parallel.describe()
+    bar = tqdm(total=len(todo), desc=f"{method.name} ({where})", unit="task",
                disable=not options.progress)
-    results = run_jobs(
-        evaluate_cell, [(method, spec(t), seed, options, False) for t, seed in todo], parallel,
-        on_done=lambda i, r: bar.update(1),
-    )
-    bar.close()
-    for (task_id, seed), result in zip(todo, results, strict=True):
+
+    def keep(i: int, result: JobResult) -> None:  # in this process, as each cell comes back
+        bar.update(1)
+        if result.error is None:
+            evaluated[todo[i][0]] = result.value
+            write_evaluated(options.results_dir, result.value)
+
+    try:
+        results = run_jobs(
+            evaluate_cell, [(method, spec(t), seed, options, False, where) for t, seed in todo],
+            parallel, on_done=keep,
+        )
+    finally:
+        bar.close()
+    for (task_id, _), result in zip(todo, results, strict=True):
         if result.error is not None:
             by_task[task_id] = failed(task_id, result.error)
-            continue
-        try:
-            by_task[task_id] = finish_cell(method, task_id, seed, options, result.value, how)
-        except SaflError as exc:
-            by_task[task_id] = failed(task_id, str(exc))
+    for task_id in task_ids:
+        if task_id in evaluated:
+            try:
+                by_task[task_id] = finish_cell(method, options, evaluated[task_id])
+            except SaflError as exc:
+                by_task[task_id] = failed(task_id, str(exc))
     return [by_task[t] for t in task_ids]
 
 

@@ -18,8 +18,10 @@ from __future__ import annotations
 import os
 import platform
 import statistics
+import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
 
@@ -76,6 +78,51 @@ def environment() -> Environment:
         thread_env={k: os.environ[k] for k in _THREAD_VARS if k in os.environ},
         versions=provenance.library_versions(_LIBRARIES),
         load_avg_1m=os.getloadavg()[0] if hasattr(os, "getloadavg") else None)
+
+
+# --------------------------------------------------------------------------- pinning
+
+
+def _threads() -> int:
+    """Threads the numeric libraries of this process may use at once (torch, numba)."""
+    counts = [provenance.torch_threads() or 1]
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        counts.append(int(numba.get_num_threads()))
+    return max(counts)
+
+
+def _cpu_list(cpus: Sequence[int]) -> str:
+    """'CPU 3', 'CPUs 0-3' or 'CPUs 0,2,5'."""
+    ordered = sorted(cpus)
+    if len(ordered) == 1:
+        return f"CPU {ordered[0]}"
+    if ordered == list(range(ordered[0], ordered[-1] + 1)):
+        return f"CPUs {ordered[0]}-{ordered[-1]}"
+    return "CPUs " + ",".join(map(str, ordered))
+
+
+@contextmanager
+def pinned() -> Iterator[str]:
+    """Bind this process to fixed CPUs while timing, so that the scheduler does not move it
+    between cores mid-measurement; as many CPUs as its libraries use threads (the lowest-numbered
+    of those it may run on), restored afterwards. Yields how it ran, for the record ('pinned to
+    CPUs 0-1', or 'not pinned (...)' where the OS has no CPU affinity)."""
+    try:
+        allowed = sorted(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        yield "not pinned (this OS sets no CPU affinity)"
+        return
+    chosen = allowed[: max(1, min(_threads(), len(allowed)))]
+    try:
+        os.sched_setaffinity(0, chosen)
+    except OSError as exc:
+        yield f"not pinned ({exc.strerror or exc})"
+        return
+    try:
+        yield f"pinned to {_cpu_list(chosen)}"
+    finally:
+        os.sched_setaffinity(0, allowed)
 
 
 # --------------------------------------------------------------------------- memory

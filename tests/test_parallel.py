@@ -17,8 +17,10 @@ from safl_bench import mapcache, runner
 from safl_bench.cli import main
 from safl_bench.datasource import kitti_source
 from safl_bench.errors import ConfigError
+from safl_bench.evaluation import EvaluationConfig
 from safl_bench.mapbuild import select_frames
 from safl_bench.mapconfig import MapConfig
+from safl_bench.matching import MatcherConfig
 from safl_bench.method_registry import make_method
 from safl_bench.noise import CLEAN, Condition
 from safl_bench.parallel import Parallel, run_jobs
@@ -47,7 +49,9 @@ def test_local_workers_give_the_serial_records(grid, kitti_root, tmp_path):
     par = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "par"), parallel=Parallel(workers=2))
     assert _results(serial) == _results(par)
     how = {o.record.timings.how_run for o in par if o.record is not None}
-    assert how == {"evaluated on 2 local worker processes; timed afterwards, sequentially, in the main process"}
+    assert len(how) == 1 and how.pop().startswith(
+        "evaluated on 2 local worker processes; timed afterwards in the main process, one cell at a "
+        "time, pinned to CPU")
     again = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "par"), parallel=Parallel(workers=2))
     assert {o.status for o in again} == {"reused"}
 
@@ -69,6 +73,51 @@ def test_a_killed_worker_loses_only_its_cell_and_a_rerun_completes(grid, kitti_r
     once = KillOnMarker(marker=str(marker), parent_pid=os.getpid(), once=True)
     survived = runner.run_cells(once, grid, options(kitti_root, tmp_path / "once"), parallel=Parallel(workers=2))
     assert not marker.exists() and [o.status for o in survived] == ["computed"] * 3
+
+
+def test_an_interrupted_parallel_run_keeps_its_evaluated_cells(grid, kitti_root, tmp_path, monkeypatch):
+    """Cells evaluated on workers are kept on disk as they come back: a run interrupted before
+    timing them (Ctrl-C) loses nothing, and the rerun times them without evaluating again."""
+    sad = make_method("sad")
+    serial = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "serial"))
+    results = tmp_path / "par"
+    real_time_describe = runner.time_describe
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "time_describe", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_cells(sad, grid, options(kitti_root, results), parallel=Parallel(workers=2))
+    assert len(list(results.rglob("*.evaluated"))) == 3 and not list(results.rglob("*.json"))
+
+    monkeypatch.setattr(runner, "time_describe", real_time_describe)
+    monkeypatch.setattr(runner, "evaluate_cell", None)  # evaluating again would fail
+    notes: list[str] = []
+    resumed = runner.run_cells(sad, grid, options(kitti_root, results), parallel=Parallel(workers=2),
+                               log=notes.append)
+    assert _results(serial) == _results(resumed)
+    assert any("3 cell(s) evaluated by an interrupted run" in n for n in notes)
+    assert not list(results.rglob("*.evaluated"))
+    assert all("evaluated on 2 local worker processes" in o.record.timings.how_run  # type: ignore[union-attr]
+               for o in resumed)
+
+
+def test_an_evaluated_cell_of_other_settings_is_evaluated_again(grid, kitti_root, tmp_path, monkeypatch):
+    sad = make_method("sad")
+    results = tmp_path / "par"
+    monkeypatch.setattr(runner, "time_describe", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+    with pytest.raises(KeyboardInterrupt):
+        runner.run_cells(sad, grid[:1], options(kitti_root, results), parallel=Parallel(workers=2))
+    monkeypatch.undo()
+    (pending,) = results.rglob("*.evaluated")
+    other = options(kitti_root, results, evaluation=EvaluationConfig(sequence=MatcherConfig(ds=5)))
+    again = runner.run_cells(sad, grid[:1], other)  # serially: the stale evaluation is not used
+    assert again[0].status == "computed" and again[0].record.matcher["sequence"]["ds"] == 5  # type: ignore[union-attr]
+    pending.write_text("{not json")
+    notes: list[str] = []
+    redo = runner.run_cells(sad, grid[:1], options(kitti_root, results), log=notes.append)
+    assert redo[0].status == "computed" and any("evaluating the cell again" in n for n in notes)
 
 
 def test_run_jobs_reports_errors_per_job():
@@ -101,22 +150,34 @@ def test_chunked_map_building_gives_the_serial_maps(kitti_root, safl_home):
 
 
 def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_path):
-    """A local Ray cluster started here (2 CPUs). Mid-cell worker deaths with records are tested
-    with local workers above; here a Ray worker that dies (a segfault) fails its own job only,
-    and the cluster then runs the grid to the serial run's records."""
+    """A local Ray cluster started here (2 CPUs) runs the grid to the serial run's records; a
+    Ray worker killed mid-cell fails its own cell only, leaves no partial record, and the rerun
+    completes the grid."""
     ray = pytest.importorskip("ray")
-    import ctypes
-
+    here = str(Path(__file__).parent)  # the workers import parallel_methods from here
+    path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH", "")) if p)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
-             runtime_env={"env_vars": {"SAFL_HOME": str(safl_home)}})
+             runtime_env={"env_vars": {"SAFL_HOME": str(safl_home), "PYTHONPATH": path}})
     try:
-        crashed = run_jobs(ctypes.string_at, [(0,)], Parallel(ray_address="auto"))
-        assert crashed[0].value is None and "died" in (crashed[0].error or "")
         sad = make_method("sad")
         serial = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "serial"))
         par = runner.run_cells(sad, grid, options(kitti_root, tmp_path / "ray"), parallel=Parallel(ray_address="auto"))
         assert _results(serial) == _results(par)
-        assert "Ray cluster (auto)" in par[0].record.timings.how_run  # type: ignore[union-attr]
+        assert par[0].record is not None and par[0].record.timings.how_run.startswith(
+            "evaluated on Ray cluster (auto); timed afterwards in the main process")
+
+        marker = tmp_path / "kill"
+        marker.write_text("")
+        results = tmp_path / "killed"
+        once = KillOnMarker(marker=str(marker), parent_pid=os.getpid(), once=True)
+        first = runner.run_cells(once, grid, options(kitti_root, results), parallel=Parallel(ray_address="auto"))
+        assert not marker.exists()  # a worker claimed it and died
+        dead = [o for o in first if o.status == "failed"]
+        assert len(dead) == 1 and "died" in dead[0].message
+        assert not dead[0].path.exists() and not list(results.rglob("*.evaluated"))
+        assert sorted(o.status for o in first) == ["computed", "computed", "failed"]
+        rerun = runner.run_cells(once, grid, options(kitti_root, results), parallel=Parallel(ray_address="auto"))
+        assert sorted(o.status for o in rerun) == ["computed", "reused", "reused"]
     finally:
         ray.shutdown()
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 
 import numpy as np
 import pytest
@@ -84,3 +85,17 @@ def test_measure_peak_sees_a_large_allocation() -> None:
     assert value == 64 * 1024 * 1024 // 8
     if mem.method == "vmhwm-reset":
         assert mem.peak_mb is not None and mem.peak_mb > 50
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity"), reason="this OS sets no CPU affinity")
+def test_pinned_binds_to_fixed_cpus_and_restores_them() -> None:
+    before = os.sched_getaffinity(0)
+    with timing.pinned() as how:
+        inside = os.sched_getaffinity(0)
+        assert how.startswith("pinned to CPU")
+        assert inside <= before and 1 <= len(inside) <= max(timing._threads(), 1)
+        assert min(inside) == min(before)
+    assert os.sched_getaffinity(0) == before
+    with pytest.raises(RuntimeError), timing.pinned():
+        raise RuntimeError("the timed call failed")
+    assert os.sched_getaffinity(0) == before  # restored on errors too
