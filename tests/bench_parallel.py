@@ -51,7 +51,7 @@ def main() -> int:
         os.environ["SAFL_KITTI_ROOT"] = str(root)
         ids = [f"Bench/Par{name}-{c.name}-v0" for c in PAPER_CONDITIONS]
         for task_id, c in zip(ids, PAPER_CONDITIONS, strict=True):
-            register(task_id, source="kitti", sequence=name, condition=c, step=4)
+            register(task_id, source="kitti", sequence=name, condition=c, step=step)  # maps cached above
         sad = make_method("sad")
         per_cell = {}
         import ray

@@ -10,7 +10,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from parallel_methods import KillOnMarker
+from parallel_methods import KillOnMarker, pid_after
 from test_runner import options, register_tiny
 
 from safl_bench import mapcache, runner
@@ -23,7 +23,7 @@ from safl_bench.mapconfig import MapConfig
 from safl_bench.matching import MatcherConfig
 from safl_bench.method_registry import make_method
 from safl_bench.noise import CLEAN, Condition
-from safl_bench.parallel import Parallel, run_jobs
+from safl_bench.parallel import Parallel, reuse_workers, run_jobs
 
 TASKS = ("Test/ParA-T1R1-v0", "Test/ParA-T5R1-v0", "Test/ParA-T1R2-v0")
 
@@ -128,6 +128,16 @@ def test_run_jobs_reports_errors_per_job():
         Parallel(workers=0)
     with pytest.raises(ConfigError, match="not both"):
         Parallel(workers=2, ray_address="auto")
+
+
+def test_reuse_workers_keeps_one_pool_across_calls():
+    two = Parallel(workers=2)
+    with reuse_workers(two):
+        first = {r.value for r in run_jobs(pid_after, [(0.2,)] * 4, two)}
+        second = {r.value for r in run_jobs(pid_after, [(0.2,)] * 4, two)}
+    assert len(first) == 2 and second == first
+    third = {r.value for r in run_jobs(pid_after, [(0.2,)] * 4, two)}
+    assert not third & first  # outside the block each call starts its own workers
 
 
 def test_chunked_map_building_gives_the_serial_maps(kitti_root, safl_home):
