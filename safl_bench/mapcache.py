@@ -20,7 +20,7 @@ import dataclasses
 import io
 import json
 import zipfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,7 @@ from safl_bench.fingerprint import fingerprint, to_jsonable
 from safl_bench.mapbuild import KINDS, build_views, check_frames
 from safl_bench.mapconfig import MapConfig
 from safl_bench.noise import Condition, sample_offsets
-from safl_bench.parallel import Parallel, run_jobs
+from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.paths import map_cache_dir
 
 CACHE_VERSION = 1  # bump when the rendering code changes what a key's file holds
@@ -155,30 +155,68 @@ def prepare(
     and compressed on the workers, each from a fresh local map of the `window` scans before its
     first frame (the map at a frame depends only on those scans, so the views are the serial
     ones); this process stores the compressed chunks in the cache files."""
-    sequence = str(sequence)
+    return prepare_sequences(source, {sequence: frames}, config, conditions=conditions, seed=seed,
+                             kinds=kinds, progress=progress, parallel=parallel)[str(sequence)]
+
+
+@dataclasses.dataclass
+class _Plan:
+    """What `prepare_sequences` must render for one sequence."""
+
+    sequence: str
+    frames: np.ndarray
+    paths: dict[tuple[Condition, str], Path]
+    missing: list[tuple[Condition, str]]
+    offsets: dict[str, np.ndarray | None]  # per condition to render
+    kinds: list[str]  # kinds to render
+    meta: dict[tuple[Condition, str], str]
+
+
+def _plan(source: DataSource, sequence: str, frames: np.ndarray, config: MapConfig,
+          conds: list[Condition], seed: int, kinds: Sequence[str]) -> _Plan:
+    frames = check_frames(frames, len(source.sequence(sequence)), sequence)
+    paths = {(c, k): cache_path(source, sequence, config, frames, c, seed, k) for c in conds for k in kinds}
+    missing = [ck for ck, p in paths.items() if not p.is_file()]
+    todo_conds = list(dict.fromkeys(c for c, _ in missing))
+    return _Plan(
+        sequence, frames, paths, missing,
+        offsets={c.name: None if c.is_clean else sample_offsets(len(frames), c, seed) for c in todo_conds},
+        kinds=[k for k in kinds if any(kk == k for _, kk in missing)],
+        meta={ck: _meta(source, sequence, config, frames, ck[0], seed, ck[1]) for ck in missing},
+    )
+
+
+def prepare_sequences(
+    source: DataSource,
+    frames: Mapping[str, np.ndarray],
+    config: MapConfig,
+    *,
+    conditions: Iterable[Condition],
+    seed: int,
+    kinds: Sequence[str] = ("topview",),
+    progress: bool = True,
+    parallel: Parallel | None = None,
+) -> dict[str, dict[tuple[Condition, str], Path]]:
+    """`prepare` for several sequences ({sequence: frames}); returns {sequence: its files}.
+
+    In parallel, the chunks of every sequence are queued at once, so the workers never wait for
+    one sequence's last chunk before starting the next, and each sequence's files are written as
+    soon as its chunks are in (an interrupted run keeps the sequences it finished)."""
     conds = list(dict.fromkeys(conditions))
     for kind in kinds:
         _check_kind(kind)
-    seq = source.sequence(sequence)
-    frames = check_frames(frames, len(seq), sequence)
-    paths = {(c, k): cache_path(source, sequence, config, frames, c, seed, k) for c in conds for k in kinds}
-    missing = [ck for ck, p in paths.items() if not p.is_file()]
-    if missing:
-        todo_conds = list(dict.fromkeys(c for c, _ in missing))
-        todo_kinds = [k for k in kinds if any(kk == k for _, kk in missing)]
-        offsets = {
-            c.name: None if c.is_clean else sample_offsets(len(frames), c, seed) for c in todo_conds
-        }
-        meta = {ck: _meta(source, sequence, config, frames, ck[0], seed, ck[1]) for ck in missing}
-        if parallel is None or parallel.serial or len(frames) < 2:
-            views = build_views(seq, config, frames, offsets, todo_kinds, progress=progress)
-            for c, k in missing:
-                _save(paths[c, k], views[c.name, k], meta[c, k])
-        else:
-            parts = _build_chunked(source, sequence, config, frames, offsets, todo_kinds, parallel, progress)
-            for c, k in missing:
-                _save_parts(paths[c, k], parts[c.name, k], meta[c, k])
-    return paths
+    plans = [_plan(source, str(name), f, config, conds, seed, kinds) for name, f in frames.items()]
+    todo = [plan for plan in plans if plan.missing]
+    serially = parallel is None or parallel.serial
+    for plan in todo:
+        if serially or len(plan.frames) < 2:
+            views = build_views(source.sequence(plan.sequence), config, plan.frames, plan.offsets,
+                                plan.kinds, progress=progress)
+            for c, k in plan.missing:
+                _save(plan.paths[c, k], views[c.name, k], plan.meta[c, k])
+    if parallel is not None and not serially:
+        _build_chunked(source, config, [p for p in todo if len(p.frames) >= 2], parallel, progress)
+    return {plan.sequence: plan.paths for plan in plans}
 
 
 def _build_chunk(
@@ -191,27 +229,55 @@ def _build_chunk(
     return {key: _compress(value) for key, value in views.items()}
 
 
-def _build_chunked(
-    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
-    offsets: dict[str, np.ndarray | None], kinds: Sequence[str], parallel: Parallel, progress: bool,
-) -> dict[tuple[str, str], list[bytes]]:
-    """{(label, kind): the compressed chunks in frame order}, rendered on the workers."""
+def _build_chunked(source: DataSource, config: MapConfig, plans: Sequence[_Plan], parallel: Parallel,
+                   progress: bool) -> None:
+    """Render the plans' views in chunks on the workers; write each plan's files (its compressed
+    chunks, in frame order) once all its chunks are in."""
     from tqdm import tqdm
 
-    chunks = [c for c in np.array_split(np.arange(len(frames)), min(len(frames), 2 * parallel.slots())) if len(c)]
+    if not plans:
+        return
     portable = dataclasses.replace(source, _open={})  # open sequences stay in this process
-    jobs = [
-        (portable, sequence, config, frames[c], {lb: None if o is None else o[c] for lb, o in offsets.items()}, kinds)
-        for c in chunks
-    ]
-    bar = tqdm(total=len(jobs), desc=f"maps {sequence} ({parallel.describe()})", unit="chunk",
+    jobs: list[tuple[Any, ...]] = []
+    owner: list[int] = []  # the plan of each job
+    # chunks of about equal size over all sequences, a few per worker: enough to balance the
+    # load, few enough that re-reading each chunk's first local map stays cheap
+    size = max(1, -(-sum(len(plan.frames) for plan in plans) // (3 * parallel.slots())))
+    for p, plan in enumerate(plans):
+        n = len(plan.frames)
+        for c in np.array_split(np.arange(n), -(-n // size)):
+            if len(c):
+                offsets = {lb: None if o is None else o[c] for lb, o in plan.offsets.items()}
+                jobs.append((portable, plan.sequence, config, plan.frames[c], offsets, plan.kinds))
+                owner.append(p)
+    waiting = [owner.count(p) for p in range(len(plans))]
+    chunks: dict[int, dict[int, Any]] = {p: {} for p in range(len(plans))}
+    errors: dict[int, str] = {}
+    names = ", ".join(plan.sequence for plan in plans)
+    bar = tqdm(total=len(jobs), desc=f"maps {names} ({parallel.describe()})", unit="chunk",
                disable=not progress, leave=False)
-    results = run_jobs(_build_chunk, jobs, parallel, on_done=lambda i, r: bar.update(1))
-    bar.close()
-    errors = [r.error for r in results if r.error is not None]
+
+    def collect(i: int, result: JobResult) -> None:
+        bar.update(1)
+        p = owner[i]
+        if result.error is not None:
+            errors.setdefault(p, result.error)
+        chunks[p][i] = result.value
+        waiting[p] -= 1
+        if waiting[p] == 0 and p not in errors:
+            plan = plans[p]
+            ordered = [chunks[p][j] for j in sorted(chunks[p])]
+            for c, k in plan.missing:
+                _save_parts(plan.paths[c, k], [chunk[c.name, k] for chunk in ordered], plan.meta[c, k])
+            chunks[p].clear()
+
+    try:
+        run_jobs(_build_chunk, jobs, parallel, on_done=collect)
+    finally:
+        bar.close()
     if errors:
-        raise DataError(f"building the maps of sequence {sequence} failed on a worker: {errors[0]}")
-    return {key: [r.value[key] for r in results] for key in results[0].value}
+        p, error = next(iter(sorted(errors.items())))
+        raise DataError(f"building the maps of sequence {plans[p].sequence} failed on a worker: {error}")
 
 
 def load_views(

@@ -11,8 +11,6 @@ are embarrassingly parallel. `run_jobs(fn, jobs, parallel)` runs `fn(*job)` for 
   "auto" joins the cluster this machine belongs to, "ray://host:10001" a remote one, "local"
   starts one on this machine; if Ray is already initialised in this process it is used as is.
 
-`with reuse_workers(parallel):` keeps one local pool for every `run_jobs` call inside the block.
-
 A job that raises gets its error back; a worker process that dies (killed, out of memory) loses
 only its own job. Ray reports that per task. A local process pool breaks as a whole when one
 of its workers dies, so the jobs it was running are rerun one by one in fresh single-worker
@@ -21,15 +19,11 @@ pools: the job that kills its worker again fails alone, the others complete.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from safl_bench.errors import ConfigError
-
-if TYPE_CHECKING:
-    from concurrent.futures import ProcessPoolExecutor
 
 
 @dataclass(frozen=True)
@@ -103,28 +97,6 @@ def run_jobs(
     return [r if r is not None else JobResult(error="not run") for r in results]
 
 
-#: Local pools kept alive by `reuse_workers`, by worker count (None: start one on first use).
-_reused: dict[int, ProcessPoolExecutor | None] = {}
-
-
-@contextmanager
-def reuse_workers(parallel: Parallel) -> Iterator[None]:
-    """Within the block, `run_jobs` calls with `parallel`'s local workers share one pool: the
-    processes start once (each costs about half a second to a second: interpreter, imports,
-    compiled kernels), not once per call, e.g. once per sequence when preparing many. Workers
-    keep the environment they started with, so use it where that does not change (a command)."""
-    if parallel.serial or parallel.ray_address is not None or parallel.workers in _reused:
-        yield
-        return
-    _reused[parallel.workers] = None
-    try:
-        yield
-    finally:
-        pool = _reused.pop(parallel.workers)
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
-
-
 def _message(exc: BaseException) -> str:
     text = str(exc).strip()
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
@@ -138,13 +110,7 @@ def _run_local(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]], workers:
 
     context = multiprocessing.get_context("spawn")
     broken: list[int] = []
-    reused = workers in _reused
-    pool = _reused.get(workers) if reused else None
-    if pool is None:
-        pool = ProcessPoolExecutor(max_workers=workers if reused else min(workers, len(jobs)),
-                                   mp_context=context)
-        if reused:
-            _reused[workers] = pool
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context)
     try:
         futures = {pool.submit(fn, *job): i for i, job in enumerate(jobs)}
         for future in as_completed(futures):
@@ -158,13 +124,8 @@ def _run_local(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]], workers:
                 done(i, JobResult(future.result()))
     except BaseException:  # e.g. Ctrl-C: do not wait for the queued jobs
         pool.shutdown(wait=False, cancel_futures=True)
-        if reused:
-            _reused[workers] = None
         raise
-    if not reused or broken:
-        pool.shutdown()
-        if reused:
-            _reused[workers] = None  # a broken pool is replaced on next use
+    pool.shutdown()
     for i in sorted(broken):  # alone, so that a job that kills its worker fails by itself
         with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
             future = pool.submit(fn, *jobs[i])

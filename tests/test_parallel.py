@@ -10,7 +10,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from parallel_methods import KillOnMarker, pid_after
+from conftest import write_kitti
+from parallel_methods import KillOnMarker
 from test_runner import options, register_tiny
 
 from safl_bench import mapcache, runner
@@ -23,7 +24,7 @@ from safl_bench.mapconfig import MapConfig
 from safl_bench.matching import MatcherConfig
 from safl_bench.method_registry import make_method
 from safl_bench.noise import CLEAN, Condition
-from safl_bench.parallel import Parallel, reuse_workers, run_jobs
+from safl_bench.parallel import Parallel, run_jobs
 
 TASKS = ("Test/ParA-T1R1-v0", "Test/ParA-T5R1-v0", "Test/ParA-T1R2-v0")
 
@@ -130,33 +131,33 @@ def test_run_jobs_reports_errors_per_job():
         Parallel(workers=2, ray_address="auto")
 
 
-def test_reuse_workers_keeps_one_pool_across_calls():
-    two = Parallel(workers=2)
-    with reuse_workers(two):
-        first = {r.value for r in run_jobs(pid_after, [(0.2,)] * 4, two)}
-        second = {r.value for r in run_jobs(pid_after, [(0.2,)] * 4, two)}
-    assert len(first) == 2 and second == first
-    third = {r.value for r in run_jobs(pid_after, [(0.2,)] * 4, two)}
-    assert not third & first  # outside the block each call starts its own workers
-
-
-def test_chunked_map_building_gives_the_serial_maps(kitti_root, safl_home):
-    source = kitti_source(kitti_root)
-    frames = select_frames(len(source.sequence("00")), 1)
+def test_chunked_map_building_gives_the_serial_maps(kitti_copy, safl_home):
+    """Two sequences' chunks in one queue on 2 workers: the same views as serial map building,
+    whichever way the cache file was written, and a parallel cache file is reused serially."""
+    write_kitti(kitti_copy, "01", n=9, seed=1)
+    source = kitti_source(kitti_copy)
+    frames = {name: select_frames(len(source.sequence(name)), 1) for name in ("00", "01")}
     conds = [CLEAN, Condition(5.0, 1.0)]
-    serial = mapcache.prepare(source, "00", MapConfig(size=32), frames=frames, conditions=conds, seed=0,
-                              kinds=("topview", "points"), progress=False)
-    expected = {key: mapcache._load(path, key[1]) for key, path in serial.items()}
-    for path in serial.values():
-        path.unlink()
-    chunked = mapcache.prepare(source, "00", MapConfig(size=32), frames=frames, conditions=conds, seed=0,
-                               kinds=("topview", "points"), progress=False, parallel=Parallel(workers=2))
-    for key, path in chunked.items():
-        got = mapcache._load(path, key[1])
-        if key[1] == "topview":
-            assert (got == expected[key]).all(), key
-        else:
-            assert all((a == b).all() for a, b in zip(got, expected[key], strict=True)), key
+    kw = dict(conditions=conds, seed=0, kinds=("topview", "points"), progress=False)
+    serial = mapcache.prepare_sequences(source, frames, MapConfig(size=32), **kw)
+    expected = {(name, key): mapcache._load(path, key[1]) for name, files in serial.items() for key, path in files.items()}
+    for files in serial.values():
+        for path in files.values():
+            path.unlink()
+    chunked = mapcache.prepare_sequences(source, frames, MapConfig(size=32), parallel=Parallel(workers=2), **kw)
+    assert set(chunked) == {"00", "01"}
+    for name, files in chunked.items():
+        for key, path in files.items():
+            got = mapcache._load(path, key[1])
+            if key[1] == "topview":
+                assert (got == expected[name, key]).all(), (name, key)
+            else:
+                assert all((a == b).all() for a, b in zip(got, expected[name, key], strict=True)), (name, key)
+    stamps = {path: path.stat().st_mtime_ns for files in chunked.values() for path in files.values()}
+    views = mapcache.load_views(source, "01", MapConfig(size=32), frames=frames["01"], condition=conds[1], seed=0,
+                                progress=False)
+    assert (views == expected["01", (conds[1], "topview")]).all()
+    assert all(path.stat().st_mtime_ns == t for path, t in stamps.items())  # reused, not rebuilt
 
 
 def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_path):

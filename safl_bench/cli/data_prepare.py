@@ -51,8 +51,7 @@ def parse_conditions(names: list[str]) -> list[Condition]:
 
 def main(args: argparse.Namespace) -> int:
     from safl_bench.datasource import resolve_source
-    from safl_bench.mapcache import prepare
-    from safl_bench.parallel import reuse_workers
+    from safl_bench.mapcache import prepare_sequences
 
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")
@@ -66,13 +65,12 @@ def main(args: argparse.Namespace) -> int:
         from safl_bench import synth
 
         sequences = list(synth.TEST_SEQUENCES)
-    with reuse_workers(parallel):  # the workers start once, not once per sequence
-        for name in sequences:
-            seq = source.sequence(name)
-            frames = select_frames(len(seq), args.step)
-            paths = prepare(source, name, config, frames=frames, conditions=conditions, seed=args.seed,
-                            kinds=args.kinds, progress=not args.quiet, parallel=parallel)
-            folder = next(iter(paths.values())).parent
-            print(f"{source.label} sequence {name}: {len(frames)} frames x {len(conditions)} "
-                  f"conditions x {len(args.kinds)} kinds cached in {folder}")
+    frames = {name: select_frames(len(source.sequence(name)), args.step) for name in sequences}
+    # one queue of map chunks for all sequences: the workers never wait between sequences
+    done = prepare_sequences(source, frames, config, conditions=conditions, seed=args.seed,
+                             kinds=args.kinds, progress=not args.quiet, parallel=parallel)
+    for name, paths in done.items():
+        folder = next(iter(paths.values())).parent
+        print(f"{source.label} sequence {name}: {len(frames[name])} frames x {len(conditions)} "
+              f"conditions x {len(args.kinds)} kinds cached in {folder}")
     return 0

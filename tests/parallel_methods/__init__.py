@@ -35,11 +35,3 @@ class KillOnMarker(Method):
                 os.kill(os.getpid(), signal.SIGKILL)
         arr = as_topview(maps)
         return np.concatenate([arr.mean(axis=2), arr.mean(axis=1)], axis=1).astype(np.float32)
-
-
-def pid_after(seconds: float) -> int:
-    """This process's id, after a pause (so that a pool's jobs spread over its workers)."""
-    import time
-
-    time.sleep(seconds)
-    return os.getpid()
