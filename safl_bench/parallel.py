@@ -144,8 +144,14 @@ def _ray_init(address: str) -> None:
     except ImportError:
         raise ConfigError("--ray needs Ray: pip install 'safl-bench[ray]'") from None
     if not ray.is_initialized():
-        ray.init(address=None if address == "local" else address, log_to_driver=False,
-                 include_dashboard=False)
+        try:
+            ray.init(address=None if address == "local" else address, log_to_driver=False,
+                     include_dashboard=False)
+        except (ConnectionError, ValueError, RuntimeError, TimeoutError) as exc:
+            lines = [line for line in str(exc).splitlines() if line.strip()]
+            hint = " (start one with `ray start --head`, or use --ray local)" if address == "auto" else ""
+            raise ConfigError(f"--ray {address}: cannot join the Ray cluster{hint}: "
+                              f"{lines[0] if lines else type(exc).__name__}") from None
 
 
 def _run_ray(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]], address: str,

@@ -131,6 +131,14 @@ def test_run_jobs_reports_errors_per_job():
         Parallel(workers=2, ray_address="auto")
 
 
+def test_no_ray_cluster_to_join_is_a_clear_error(monkeypatch):
+    ray = pytest.importorskip("ray")
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    assert not ray.is_initialized()
+    with pytest.raises(ConfigError, match=r"--ray auto: cannot join the Ray cluster \(start one"):
+        Parallel(ray_address="auto").slots()
+
+
 def test_chunked_map_building_gives_the_serial_maps(kitti_copy, safl_home):
     """Two sequences' chunks in one queue on 2 workers: the same views as serial map building,
     whichever way the cache file was written, and a parallel cache file is reused serially."""
