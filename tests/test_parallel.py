@@ -209,3 +209,19 @@ def test_cli_workers_and_bad_values(grid, kitti_root, tmp_path, capsys):
     assert main([*argv, "--workers", "0"]) == 2
     assert main([*argv, "--workers", "2", "--ray", "auto"]) == 2
     assert "not both" in capsys.readouterr().err
+
+
+def test_bench_parallel_prints_the_speed_up_and_the_per_cell_times(kitti_root, safl_home, tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    argv = ["bench", "parallel", "--kitti-root", str(kitti_root), "--ray", "none", "--quiet"]
+    assert main([*argv, "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "12 frames x 13 conditions: 1 worker" in text and "-> speed-up" in text
+    assert "SAD, 12 cells with cached maps, seconds per cell: serial" in text
+    figures = json.loads(out.read_text())
+    assert figures["map_building"]["speedup"] > 0 and figures["cells"]["local_s_per_cell"] > 0
+    assert os.environ["SAFL_HOME"] == str(safl_home)  # the scratch home is gone again
+    assert not list(safl_home.rglob("*.npz"))  # nothing built into the user's cache
+    assert main([*argv, "--workers", "1"]) == 2
+    assert main([*argv, "--sequence", "07"]) == 2
+    assert "07" in capsys.readouterr().err

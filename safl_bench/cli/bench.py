@@ -4,6 +4,8 @@
                                                  batched throughput, 4541² difference matrix
   safl-bench bench matcher [--n 4541]            descriptors -> matches on a KITTI-00-sized
                                                  problem, peak memory, ratio to the plain loop
+  safl-bench bench parallel [--workers 2]        map building 1 worker against N, seconds per
+                                                 cell serially, on local workers and on Ray
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -15,18 +17,26 @@ import argparse
 
 from safl_bench.errors import ConfigError
 
-HELP = "print speed figures: descriptor ms/frame per method, matcher time and memory"
+HELP = "print speed figures: descriptor ms/frame per method, matcher time and memory, parallel speed-up"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
     parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v0)")
     parser.add_argument("--frames", type=int, default=50, help="frames per timed batch-1 run (default 50)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
     parser.add_argument("--n", type=int, default=4541, help="frames of the difference matrix (default 4541, KITTI 00); 0 skips it")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
+    parser.add_argument("--sequence", default="00", help="parallel: the sequence whose maps are built (default 00)")
+    parser.add_argument("--step", type=int, default=1, help="parallel: frame step (default 1: every frame)")
+    parser.add_argument("--workers", type=int, default=2, help="parallel: local workers against one (default 2)")
+    parser.add_argument("--ray", default=None, metavar="ADDRESS",
+                        help="parallel: 'local' (a Ray cluster started here with --workers CPUs; the "
+                             "default where Ray is installed), 'auto', 'ray://HOST:10001' or 'none'")
+    parser.add_argument("--kitti-root", metavar="DIR", default=None,
+                        help="parallel: KITTI odometry root (default: the synthetic default)")
     parser.add_argument("--json", help="also write every figure, with the environment, to this JSON file")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -43,6 +53,8 @@ def main(args: argparse.Namespace) -> int:
         import torch
 
         torch.set_num_threads(args.threads)
+    if args.what == "parallel":
+        return _parallel(args)
     if args.what == "matcher":
         from safl_bench import matching_bench
 
@@ -58,6 +70,25 @@ def main(args: argparse.Namespace) -> int:
         repeats=args.repeats, matrix_n=args.n or None, progress=not args.quiet,
     )
     print(method_bench.format_results(results))
+    if args.json:
+        atomic_write_json(args.json, results)
+    return 0
+
+
+def _parallel(args: argparse.Namespace) -> int:
+    from safl_bench import parallel_bench
+    from safl_bench.atomic import atomic_write_json
+    from safl_bench.datasource import resolve_source
+
+    if args.step < 1:
+        raise ConfigError(f"--step must be >= 1, got {args.step}")
+    source = resolve_source(args.kitti_root, sequences=[args.sequence], progress=not args.quiet)
+    source.sequence(args.sequence)  # a missing sequence is named here, before any timing
+    results = parallel_bench.run(
+        source.root, args.sequence, step=args.step, workers=args.workers,
+        ray_address=args.ray or parallel_bench.default_ray(), progress=not args.quiet,
+    )
+    print(parallel_bench.format_results(results))
     if args.json:
         atomic_write_json(args.json, results)
     return 0
