@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from safl_bench.errors import SaflError
+from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method
 from safl_bench.method import Method
 from safl_bench.parallel import JobResult, Parallel, run_jobs
@@ -70,6 +70,7 @@ class CellOutcome:
     path: Path
     record: ResultRecord | None = None
     message: str = ""
+    method: str = ""  # the method's name
 
 
 def resolve_tasks(items: Sequence[str], *, kitti: bool = False) -> list[str]:
@@ -125,7 +126,7 @@ def _existing(
         else:
             why = _same_run(old.method, old.task, old.matcher, info, registered.fingerprint, matcher)
             if not why:
-                return seed, CellOutcome(registered.id, seed, "reused", path, old)
+                return seed, CellOutcome(registered.id, seed, "reused", path, old, method=info.name)
             log(f"note: {path} was made with other settings ({why}); recomputing it")
     pending = evaluated_path(options.results_dir, info.name, info.version, registered.id, seed)
     if pending.is_file():
@@ -215,7 +216,7 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
     written = write_record(options.results_dir, record)
     evaluated_path(options.results_dir, cell.method.name, cell.method.version, cell.task.id,
                    cell.seed).unlink(missing_ok=True)
-    return CellOutcome(cell.task.id, cell.seed, "computed", written, record)
+    return CellOutcome(cell.task.id, cell.seed, "computed", written, record, method=cell.method.name)
 
 
 def run_cell(
@@ -244,14 +245,29 @@ def run_cells(
     log: Callable[[str], None] | None = None,
     parallel: Parallel | None = None,
 ) -> list[CellOutcome]:
-    """Run every task; a cell that fails (bad data, a dead worker) is reported and the others
-    go on.
+    """Run one method on every task with `options.seed` (see `run_grid`)."""
+    return run_grid([method], task_ids, options, log=log, parallel=parallel)
+
+
+def run_grid(
+    methods: Sequence[Method],
+    task_ids: Sequence[str],
+    options: RunOptions,
+    *,
+    seeds: Sequence[int | None] | None = None,
+    log: Callable[[str], None] | None = None,
+    parallel: Parallel | None = None,
+) -> list[CellOutcome]:
+    """Run every (method, seed, task) cell, in that order (`seeds`: default `[options.seed]`,
+    None meaning each task's registered seed); a cell that fails (bad data, a dead worker) is
+    reported and the others go on.
 
     Serially (the default) each cell is evaluated, timed and written in turn. With `parallel`
-    (local workers or Ray) the cells are evaluated on the workers, and each evaluation is kept
-    on disk as it comes back (an interrupted run resumes from them); once every worker has
-    finished, this process times the cells one by one, pinned, and writes the records: no
-    timing is taken while workers compete for the cores, and only this process writes files.
+    (local workers or Ray) all the cells of the grid are queued at once and evaluated on the
+    workers, and each evaluation is kept on disk as it comes back (an interrupted run resumes
+    from them); once every worker has finished, this process times the cells one by one, pinned,
+    and writes the records: no timing is taken while workers compete for the cores, and only
+    this process writes files.
     """
     from tqdm import tqdm
 
@@ -261,68 +277,80 @@ def run_cells(
         else:
             tqdm.write(message, file=sys.stderr)
 
-    def failed(task_id: str, message: str) -> CellOutcome:
-        seed = spec(task_id).seed if options.seed is None else options.seed
-        path = record_path(options.results_dir, method.name, method.version, task_id, seed)
-        say(f"error: {task_id}: {message}")
-        return CellOutcome(task_id, seed, "failed", path, message=message)
+    names = [f"{m.name}@{m.version}" for m in methods]
+    if len(set(names)) < len(names):
+        raise ConfigError(f"one grid cannot hold one method twice ({', '.join(names)}): their "
+                          "records would share a path; run them into separate --results")
+    cells = [
+        (method, task_id, dataclasses.replace(options, seed=seed))
+        for method in methods
+        for seed in dict.fromkeys([options.seed] if seeds is None else seeds)
+        for task_id in task_ids
+    ]
 
+    def failed(i: int, message: str) -> CellOutcome:
+        method, task_id, opts = cells[i]
+        seed = spec(task_id).seed if opts.seed is None else opts.seed
+        path = record_path(opts.results_dir, method.name, method.version, task_id, seed)
+        label = task_id if len(methods) == 1 else f"{method.name} on {task_id}"
+        say(f"error: {label}{'' if opts.seed is None else f' (seed {seed})'}: {message}")
+        return CellOutcome(task_id, seed, "failed", path, message=message, method=method.name)
+
+    outcomes: dict[int, CellOutcome] = {}
     if parallel is None or parallel.serial:
-        outcomes: list[CellOutcome] = []
-        bar = tqdm(task_ids, desc=f"{method.name}", unit="task", disable=not options.progress)
-        for task_id in bar:
+        bar = tqdm(range(len(cells)), desc="/".join(m.name for m in methods), unit="task",
+                   disable=not options.progress)
+        for i in bar:
+            method, task_id, opts = cells[i]
             bar.set_postfix_str(task_id)
             try:
-                outcomes.append(run_cell(method, task_id, options, log=say))
+                outcomes[i] = run_cell(method, task_id, opts, log=say)
             except SaflError as exc:
-                outcomes.append(failed(task_id, str(exc)))
-        return outcomes
+                outcomes[i] = failed(i, str(exc))
+        return [outcomes[i] for i in range(len(cells))]
 
-    by_task: dict[str, CellOutcome] = {}
-    evaluated: dict[str, EvaluatedCell] = {}
-    todo: list[tuple[str, int]] = []
-    for task_id in task_ids:
+    evaluated: dict[int, EvaluatedCell] = {}
+    todo: list[tuple[int, int]] = []  # (cell, seed)
+    for i, (method, task_id, opts) in enumerate(cells):
         try:
-            seed, existing = _existing(method, task_id, options, say)
+            seed, existing = _existing(method, task_id, opts, say)
         except SaflError as exc:
-            by_task[task_id] = failed(task_id, str(exc))
+            outcomes[i] = failed(i, str(exc))
             continue
         if isinstance(existing, CellOutcome):
-            by_task[task_id] = existing
+            outcomes[i] = existing
         elif isinstance(existing, EvaluatedCell):
-            evaluated[task_id] = existing
+            evaluated[i] = existing
         else:
-            todo.append((task_id, seed))
+            todo.append((i, seed))
     if evaluated:
         say(f"note: {len(evaluated)} cell(s) evaluated by an interrupted run are timed, not "
             "evaluated again")
     where = parallel.describe()
-    bar = tqdm(total=len(todo), desc=f"{method.name} ({where})", unit="task",
+    bar = tqdm(total=len(todo), desc=f"{'/'.join(m.name for m in methods)} ({where})", unit="task",
                disable=not options.progress)
 
-    def keep(i: int, result: JobResult) -> None:  # in this process, as each cell comes back
+    def keep(j: int, result: JobResult) -> None:  # in this process, as each cell comes back
         bar.update(1)
         if result.error is None:
-            evaluated[todo[i][0]] = result.value
+            evaluated[todo[j][0]] = result.value
             write_evaluated(options.results_dir, result.value)
 
+    jobs = [(cells[i][0], spec(cells[i][1]), seed, cells[i][2], False, where) for i, seed in todo]
     try:
-        results = run_jobs(
-            evaluate_cell, [(method, spec(t), seed, options, False, where) for t, seed in todo],
-            parallel, on_done=keep,
-        )
+        results = run_jobs(evaluate_cell, jobs, parallel, on_done=keep)
     finally:
         bar.close()
-    for (task_id, _), result in zip(todo, results, strict=True):
+    for (i, _), result in zip(todo, results, strict=True):
         if result.error is not None:
-            by_task[task_id] = failed(task_id, result.error)
-    for task_id in task_ids:
-        if task_id in evaluated:
-            try:
-                by_task[task_id] = finish_cell(method, options, evaluated[task_id])
-            except SaflError as exc:
-                by_task[task_id] = failed(task_id, str(exc))
-    return [by_task[t] for t in task_ids]
+            outcomes[i] = failed(i, result.error)
+    for i in sorted(evaluated):
+        method, _, opts = cells[i]
+        try:
+            outcomes[i] = finish_cell(method, opts, evaluated[i])
+        except SaflError as exc:
+            outcomes[i] = failed(i, str(exc))
+    return [outcomes[i] for i in range(len(cells))]
 
 
 def _pct(value: float | None) -> str:
@@ -330,17 +358,22 @@ def _pct(value: float | None) -> str:
 
 
 def summary_table(outcomes: Sequence[CellOutcome]) -> str:
-    """A plain-text table of the headline figures per task (sequence matching unless noted)."""
-    header = ("task", "R@100%P", "AUC", "F1max", "R@100%P 1-frame", "ms/frame", "record")
+    """A plain-text table of the headline figures per cell (sequence matching unless noted); a
+    method and a seed column only when the cells have more than one of them."""
+    by_method = len({o.method for o in outcomes}) > 1
+    by_seed = len({o.seed for o in outcomes}) > 1
+    lead = (("method",) if by_method else ()) + ("task",) + (("seed",) if by_seed else ())
+    header = (*lead, "R@100%P", "AUC", "F1max", "R@100%P 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
     for o in outcomes:
+        key = ((o.method,) if by_method else ()) + (o.task_id,) + ((str(o.seed),) if by_seed else ())
         if o.record is None:
-            rows.append((o.task_id, "—", "—", "—", "—", "—", f"failed: {o.message}"))
+            rows.append((*key, "—", "—", "—", "—", "—", f"failed: {o.message}"))
             continue
         seq = o.record.results["sequence"].metrics
         single = o.record.results["single_frame"].metrics
         rows.append((
-            o.task_id,
+            *key,
             _pct(seq.recall_at_100_precision),
             "—" if seq.auc is None else f"{seq.auc:.3f}",
             f"{seq.f1_max:.3f}",

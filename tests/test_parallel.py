@@ -57,6 +57,20 @@ def test_local_workers_give_the_serial_records(grid, kitti_root, tmp_path):
     assert {o.status for o in again} == {"reused"}
 
 
+def test_a_grid_of_methods_and_seeds_is_one_queue_with_the_serial_records(grid, kitti_root, tmp_path):
+    methods = [make_method("sad"), KillOnMarker()]  # no marker: a plain row/column profile
+    serial = runner.run_grid(methods, grid[:2], options(kitti_root, tmp_path / "serial"), seeds=[0, 5])
+    par = runner.run_grid(methods, grid[:2], options(kitti_root, tmp_path / "par"), seeds=[0, 5],
+                          parallel=Parallel(workers=2))
+    assert [(o.method, o.seed, o.task_id) for o in par] == [
+        (m, seed, t) for m in ("sad", "kill_on_marker") for seed in (0, 5) for t in grid[:2]]
+    assert _results(serial) == _results(par) and len(_results(par)) == 8
+    table = runner.summary_table(par)
+    assert table.splitlines()[0].split()[:3] == ["method", "task", "seed"]
+    with pytest.raises(ConfigError, match="one method twice"):
+        runner.run_grid([make_method("sad"), make_method("sad", size=16)], grid, options(kitti_root, tmp_path))
+
+
 def test_a_killed_worker_loses_only_its_cell_and_a_rerun_completes(grid, kitti_root, tmp_path):
     marker = tmp_path / "kill"
     marker.write_text("")
@@ -206,6 +220,11 @@ def test_cli_workers_and_bad_values(grid, kitti_root, tmp_path, capsys):
             "--results", str(tmp_path), "--quiet"]
     assert main([*argv, "--workers", "2"]) == 0
     assert "computed" in capsys.readouterr().out
+    assert main([*argv, "--seed", "0", "--seed", "3", "--workers", "2"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split()[:2] == ["task", "seed"] and [ln.split()[-1] for ln in lines[3:]] == ["reused", "computed"]
+    assert main([*argv, "--method", "bigan", "--param", "epochs=1"]) == 2
+    assert "--param apply to one method" in capsys.readouterr().err
     assert main([*argv, "--workers", "0"]) == 2
     assert main([*argv, "--workers", "2", "--ray", "auto"]) == 2
     assert "not both" in capsys.readouterr().err

@@ -10,20 +10,24 @@ from typing import Any
 from safl_bench.cli.options import add_parallel_arguments, parallel_from, parse_key_values
 
 HELP = (
-    "Run a method on benchmark tasks (default: the paper's twelve conditions on the embedded "
+    "Run methods on benchmark tasks (default: the paper's twelve conditions on the embedded "
     "synthetic default's test sequence), generating and caching whatever data is missing. One "
-    "JSON record per (method, task, seed) is written; existing records are reused unless --force."
+    "JSON record per (method, task, seed) cell is written; existing records are reused unless "
+    "--force."
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--method", required=True, help="registered method (safl-bench list methods)")
+    parser.add_argument("--method", required=True, action="append",
+                        help="registered method (safl-bench list methods); repeatable: the grid "
+                             "method x task x seed runs as one queue")
     parser.add_argument(
         "--task", action="append", default=[], metavar="ID|SUITE",
         help="task id or suite (paper, paper-full, revisit, sanity, all); repeatable; default: paper",
     )
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
-    parser.add_argument("--seed", type=int, help="seed of the query noise (default: the task's own)")
+    parser.add_argument("--seed", type=int, action="append",
+                        help="seed of the query noise (default: the task's own); repeatable")
     parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")
     parser.add_argument("--force", action="store_true", help="recompute cells whose record exists")
     parser.add_argument(
@@ -64,27 +68,33 @@ def matcher_config(score: str, items: list[str]) -> Any:
 
 
 def main(args: argparse.Namespace) -> int:
+    from safl_bench.errors import ConfigError
     from safl_bench.evaluation import EvaluationConfig
     from safl_bench.method_registry import make_method
     from safl_bench.records import default_results_dir
-    from safl_bench.runner import RunOptions, resolve_tasks, run_cells, summary_table
+    from safl_bench.runner import RunOptions, resolve_tasks, run_grid, summary_table
 
+    names = list(dict.fromkeys(args.method))
+    if len(names) > 1 and (args.weights or args.param):
+        raise ConfigError("--weights and --param apply to one method: give them with a single --method")
     task_ids = resolve_tasks(args.task, kitti=args.kitti_root is not None)
-    method = make_method(args.method, weights=args.weights, **parse_key_values(args.param, "--param"))
+    methods = [make_method(name, weights=args.weights, **parse_key_values(args.param, "--param"))
+               for name in names]
+    seeds = list(dict.fromkeys(args.seed)) if args.seed else [None]
     options = RunOptions(
         results_dir=Path(args.results) if args.results else default_results_dir(),
-        seed=args.seed,
+        seed=seeds[0],
         force=args.force,
         kitti_root=args.kitti_root,
         evaluation=EvaluationConfig(matcher_config(args.score, args.matcher)),
         progress=not args.quiet,
     )
-    outcomes = run_cells(method, task_ids, options, parallel=parallel_from(args))
-    print(f"{method.name}@{method.version} — records in {options.results_dir}")
+    outcomes = run_grid(methods, task_ids, options, seeds=seeds, parallel=parallel_from(args))
+    print(f"{', '.join(f'{m.name}@{m.version}' for m in methods)} — records in {options.results_dir}")
     print(summary_table(outcomes))
     failed = [o for o in outcomes if o.status == "failed"]
     if failed:
-        print(f"safl-bench: {len(failed)} of {len(outcomes)} tasks failed (see above); "
+        print(f"safl-bench: {len(failed)} of {len(outcomes)} cells failed (see above); "
               "rerun to retry them", file=sys.stderr)
         return 2
     return 0
