@@ -111,13 +111,18 @@ def pinned() -> Iterator[str]:
     try:
         allowed = sorted(os.sched_getaffinity(0))
     except (AttributeError, OSError):
+        allowed = []
+    if not allowed:
         yield "not pinned (this OS sets no CPU affinity)"
         return
     chosen = allowed[: max(1, min(_threads(), len(allowed)))]
+    refused = ""
     try:
         os.sched_setaffinity(0, chosen)
     except OSError as exc:
-        yield f"not pinned ({exc.strerror or exc})"
+        refused = exc.strerror or str(exc)
+    if refused:
+        yield f"not pinned ({refused})"
         return
     try:
         yield f"pinned to {_cpu_list(chosen)}"
