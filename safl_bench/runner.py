@@ -42,7 +42,7 @@ from safl_bench.records import (
 )
 from safl_bench.tasks import registry, spec, suite
 from safl_bench.tasks.spec import TaskSpec
-from safl_bench.tasks.task import Task
+from safl_bench.tasks.task import Task, prepare_tasks
 from safl_bench.timing import pinned, time_describe
 
 
@@ -277,9 +277,9 @@ def run_grid(
         else:
             tqdm.write(message, file=sys.stderr)
 
-    names = [f"{m.name}@{m.version}" for m in methods]
-    if len(set(names)) < len(names):
-        raise ConfigError(f"one grid cannot hold one method twice ({', '.join(names)}): their "
+    versions = [f"{m.name}@{m.version}" for m in methods]
+    if len(set(versions)) < len(versions):
+        raise ConfigError(f"one grid cannot hold one method twice ({', '.join(versions)}): their "
                           "records would share a path; run them into separate --results")
     cells = [
         (method, task_id, dataclasses.replace(options, seed=seed))
@@ -297,20 +297,8 @@ def run_grid(
         return CellOutcome(task_id, seed, "failed", path, message=message, method=method.name)
 
     outcomes: dict[int, CellOutcome] = {}
-    if parallel is None or parallel.serial:
-        bar = tqdm(range(len(cells)), desc="/".join(m.name for m in methods), unit="task",
-                   disable=not options.progress)
-        for i in bar:
-            method, task_id, opts = cells[i]
-            bar.set_postfix_str(task_id)
-            try:
-                outcomes[i] = run_cell(method, task_id, opts, log=say)
-            except SaflError as exc:
-                outcomes[i] = failed(i, str(exc))
-        return [outcomes[i] for i in range(len(cells))]
-
     evaluated: dict[int, EvaluatedCell] = {}
-    todo: list[tuple[int, int]] = []  # (cell, seed)
+    todo: dict[int, int] = {}  # cell -> seed
     for i, (method, task_id, opts) in enumerate(cells):
         try:
             seed, existing = _existing(method, task_id, opts, say)
@@ -322,26 +310,44 @@ def run_grid(
         elif isinstance(existing, EvaluatedCell):
             evaluated[i] = existing
         else:
-            todo.append((i, seed))
+            todo[i] = seed
     if evaluated:
         say(f"note: {len(evaluated)} cell(s) evaluated by an interrupted run are timed, not "
             "evaluated again")
+    tasks = _prepare_views(cells, todo, parallel, options.progress, failed, outcomes)
+    names = "/".join(m.name for m in methods)
+
+    if parallel is None or parallel.serial:
+        bar = tqdm(sorted([*evaluated, *tasks]), desc=names, unit="task", disable=not options.progress)
+        for i in bar:
+            method, task_id, opts = cells[i]
+            bar.set_postfix_str(task_id)
+            try:
+                if i in evaluated:
+                    outcomes[i] = finish_cell(method, opts, evaluated[i])
+                else:
+                    cell = _evaluate(method, spec(task_id), tasks[i], opts, "this process")
+                    outcomes[i] = finish_cell(method, opts, cell, tasks[i])
+            except SaflError as exc:
+                outcomes[i] = failed(i, str(exc))
+        return [outcomes[i] for i in range(len(cells))]
+
     where = parallel.describe()
-    bar = tqdm(total=len(todo), desc=f"{'/'.join(m.name for m in methods)} ({where})", unit="task",
-               disable=not options.progress)
+    order = sorted(tasks)
+    bar = tqdm(total=len(order), desc=f"{names} ({where})", unit="task", disable=not options.progress)
 
     def keep(j: int, result: JobResult) -> None:  # in this process, as each cell comes back
         bar.update(1)
         if result.error is None:
-            evaluated[todo[j][0]] = result.value
+            evaluated[order[j]] = result.value
             write_evaluated(options.results_dir, result.value)
 
-    jobs = [(cells[i][0], spec(cells[i][1]), seed, cells[i][2], False, where) for i, seed in todo]
+    jobs = [(cells[i][0], spec(cells[i][1]), todo[i], cells[i][2], False, where) for i in order]
     try:
         results = run_jobs(evaluate_cell, jobs, parallel, on_done=keep)
     finally:
         bar.close()
-    for (i, _), result in zip(todo, results, strict=True):
+    for i, result in zip(order, results, strict=True):
         if result.error is not None:
             outcomes[i] = failed(i, result.error)
     for i in sorted(evaluated):
@@ -351,6 +357,35 @@ def run_grid(
         except SaflError as exc:
             outcomes[i] = failed(i, str(exc))
     return [outcomes[i] for i in range(len(cells))]
+
+
+def _prepare_views(
+    cells: Sequence[tuple[Method, str, RunOptions]],
+    todo: dict[int, int],
+    parallel: Parallel | None,
+    progress: bool,
+    failed: Callable[[int, str], CellOutcome],
+    outcomes: dict[int, CellOutcome],
+) -> dict[int, Task]:
+    """Open the tasks of the cells to compute and render all their views first, in as few passes
+    over the scans as possible (`prepare_tasks`: the twelve paper conditions of a sequence in
+    one pass, not twelve), on the workers when there are some. Cells whose task or views fail
+    are recorded in `outcomes`; returns the others' tasks."""
+    tasks: dict[int, Task] = {}
+    for i, seed in todo.items():
+        _, task_id, opts = cells[i]
+        try:
+            tasks[i] = _task(spec(task_id), seed, opts, progress)
+        except SaflError as exc:
+            outcomes[i] = failed(i, str(exc))
+    for kind in dict.fromkeys(cells[i][0].input_kind for i in tasks):
+        members = [i for i in tasks if cells[i][0].input_kind == kind]
+        problems = prepare_tasks([tasks[i] for i in members], (kind,), parallel=parallel,
+                                 progress=progress)
+        for j, message in problems.items():
+            outcomes[members[j]] = failed(members[j], message)
+            tasks.pop(members[j])
+    return tasks
 
 
 def _pct(value: float | None) -> str:

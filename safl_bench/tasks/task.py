@@ -28,6 +28,7 @@ from safl_bench.tasks.spec import TaskSpec
 
 if TYPE_CHECKING:
     from safl_bench.datasource import DataSource
+    from safl_bench.parallel import Parallel
 
 KINDS = ("topview", "points")
 
@@ -222,3 +223,35 @@ class Task:
             out["data_label"] = self.source.label
             out["data_fingerprint"] = self.source.fingerprint(self.spec.sequence)
         return out
+
+
+def prepare_tasks(tasks: Sequence[Task], kinds: Sequence[str] = ("topview",), *,
+                  parallel: Parallel | None = None, progress: bool = True) -> dict[int, str]:
+    """Render the views of many tasks with as few passes over the scans as possible: tasks on
+    the same sequence, frames, map configuration and seed (e.g. the paper's twelve conditions)
+    share one pass for all their conditions, instead of one pass each; with `parallel`, each
+    pass runs in chunks on the workers (`mapcache.prepare`). Returns {index in `tasks`: why its
+    views could not be rendered}; the other tasks' views are cached."""
+    from safl_bench import mapcache
+    from safl_bench.errors import SaflError
+
+    groups: dict[tuple[Any, ...], tuple[DataSource, Task, list[Any], list[int]]] = {}
+    for i, task in enumerate(tasks):
+        if task.source is None:
+            continue
+        for kind in kinds:
+            task._check_kind(kind)
+            key = (task.source.kind, str(task.source.root), task.spec.sequence, task.spec.map_config,
+                   task.database_frames.tobytes(), task.spec.seed, kind)
+            _, _, conditions, members = groups.setdefault(key, (task.source, task, [], []))
+            conditions.extend(c for c in task._conditions() if c not in conditions)
+            members.append(i)
+    failed: dict[int, str] = {}
+    for (*_, kind), (source, task, conditions, members) in groups.items():
+        try:
+            mapcache.prepare(source, task.spec.sequence, task.spec.map_config,
+                             frames=task.database_frames, conditions=conditions, seed=task.spec.seed,
+                             kinds=(kind,), progress=progress, parallel=parallel)
+        except SaflError as exc:
+            failed.update((i, str(exc)) for i in members)
+    return failed
