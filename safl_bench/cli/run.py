@@ -48,7 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sequence-matcher setting (safl_bench.matching.MatcherConfig), e.g. enhance_window=0 "
         "or ds=5; repeatable; recorded with every result (default: the paper's Table I)",
     )
-    add_parallel_arguments(parser, "evaluate the cells")
+    add_parallel_arguments(parser, "build the views and evaluate the cells")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
