@@ -73,6 +73,8 @@ def sample_offsets(n: int, condition: Condition, seed: int) -> np.ndarray:
     """
     if n < 0:
         raise ConfigError(f"number of frames must be >= 0, got {n}")
+    if int(seed) < 0:
+        raise ConfigError(f"noise seed must be an integer >= 0, got {seed}")
     key = [int(seed), round(condition.translation_m * 1000), round(condition.heading_rad * 1000)]
     rng = np.random.default_rng(np.random.SeedSequence(key))
     u, phi, h = rng.random((3, n))

@@ -157,3 +157,10 @@ def test_the_views_of_all_cells_are_rendered_in_one_pass(tiny_tasks, kitti_root,
     out = runner.run_cells(make_method("sad"), tiny_tasks, options(kitti_root, tmp_path))
     assert [o.status for o in out] == ["computed", "computed"]
     assert passes == [["T0R0", "T1R1", "T5R1"]]
+
+
+@pytest.mark.parametrize("command", [["run", "--method", "sad"], ["data", "prepare"], ["train", "--method", "bigan"]])
+def test_a_negative_seed_is_refused_by_name(command, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main([*command, "--seed", "-1"])
+    assert exit_.value.code == 2 and "a seed is an integer >= 0, got -1" in capsys.readouterr().err

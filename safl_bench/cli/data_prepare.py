@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from safl_bench.cli.options import add_parallel_arguments, parallel_from
+from safl_bench.cli.options import add_parallel_arguments, parallel_from, seed
 from safl_bench.errors import ConfigError
 from safl_bench.mapbuild import DEFAULT_STEP, KINDS, select_frames
 from safl_bench.mapconfig import BACKENDS, ENCODINGS, MapConfig
@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default: paper)")
     parser.add_argument("--kinds", nargs="+", choices=KINDS, default=["topview"],
                         help="views to cache (default: topview)")
-    parser.add_argument("--seed", type=int, default=0, help="noise seed and synthetic seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="noise seed and synthetic seed (default 0)")
     add_parallel_arguments(parser, "build the maps (chunks of each sequence's frames)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 

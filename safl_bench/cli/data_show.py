@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from safl_bench.cli.options import seed
 from safl_bench.errors import DataError
 
 HELP = "draw a sequence (route with revisits, bird's-eye scans, top-view maps) to a PNG"
@@ -20,7 +21,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sequence", default="00", help="sequence to draw (default 00)")
     parser.add_argument("--out", metavar="PNG", default=None,
                         help="image to write (default: show-<sequence>.png in the current folder)")
-    parser.add_argument("--seed", type=int, default=0, help="synthetic seed when --root is not given")
+    parser.add_argument("--seed", type=seed, default=0, help="synthetic seed when --root is not given")
     parser.add_argument("--scans", type=int, default=3, help="number of scans and maps shown (default 3)")
 
 

@@ -6,6 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
+from safl_bench.cli.options import seed
 from safl_bench.errors import DataError
 
 HELP = "generate the synthetic town + simulated 64-beam LiDAR sequences (KITTI odometry layout)"
@@ -18,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "$SAFL_HOME/synth/seed-N)")
     parser.add_argument("--sequences", nargs="+", metavar="XX", default=None,
                         help="sequences to generate (default: test 00 09 and training 01-04)")
-    parser.add_argument("--seed", type=int, default=None, help="random seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=None, help="random seed (default 0)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

@@ -23,6 +23,19 @@ def parse_key_values(items: list[str], flag: str) -> dict[str, Any]:
     return out
 
 
+def seed(text: str) -> int:
+    """argparse type of a seed: an integer >= 0 (numpy's generators take no negative seeds)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is an integer >= 0, got {value}")
+    return value
+
+
 def add_parallel_arguments(parser: Any, what: str) -> None:
     """--workers N and --ray ADDRESS (see `safl_bench.parallel`)."""
     parser.add_argument("--workers", type=int, default=1, metavar="N",

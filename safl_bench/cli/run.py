@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from safl_bench.cli.options import add_parallel_arguments, parallel_from, parse_key_values
+from safl_bench.cli.options import add_parallel_arguments, parallel_from, parse_key_values, seed
 
 HELP = (
     "Run methods on benchmark tasks (default: the paper's twelve conditions on the embedded "
@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="task id or suite (paper, paper-full, revisit, sanity, all); repeatable; default: paper",
     )
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
-    parser.add_argument("--seed", type=int, action="append",
+    parser.add_argument("--seed", type=seed, action="append",
                         help="seed of the query noise (default: the task's own); repeatable")
     parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")
     parser.add_argument("--force", action="store_true", help="recompute cells whose record exists")

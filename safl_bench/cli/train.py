@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from safl_bench.cli.options import parse_key_values
+from safl_bench.cli.options import parse_key_values, seed
 from safl_bench.errors import ConfigError
 
 HELP = "train a learned descriptor (bigan, stable_afl) on the training sequences"
@@ -44,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1: all)")
     parser.add_argument("--epochs", type=int, help="number of epochs (default: the method's, 20)")
     parser.add_argument("--batch-size", type=int, help="batch size (default: the method's, 64)")
-    parser.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    parser.add_argument("--seed", type=seed, default=0, help="training seed (default 0)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="a constructor parameter (value parsed as JSON, else a string); repeatable")
     parser.add_argument("--out", help="output directory")
