@@ -325,15 +325,17 @@ def run_grid(
             try:
                 if i in evaluated:
                     outcomes[i] = finish_cell(method, opts, evaluated[i])
-                else:
-                    cell = _evaluate(method, spec(task_id), tasks[i], opts, "this process")
-                    outcomes[i] = finish_cell(method, opts, cell, tasks[i])
+                else:  # popped: its views leave memory with the cell
+                    task = tasks.pop(i)
+                    cell = _evaluate(method, spec(task_id), task, opts, "this process")
+                    outcomes[i] = finish_cell(method, opts, cell, task)
             except SaflError as exc:
                 outcomes[i] = failed(i, str(exc))
         return [outcomes[i] for i in range(len(cells))]
 
     where = parallel.describe()
-    order = sorted(tasks)
+    order = sorted(tasks)  # the workers open their own tasks
+    tasks.clear()
     bar = tqdm(total=len(order), desc=f"{names} ({where})", unit="task", disable=not options.progress)
 
     def keep(j: int, result: JobResult) -> None:  # in this process, as each cell comes back
