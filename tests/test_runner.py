@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import write_kitti
 
 from safl_bench import runner, tasks
 from safl_bench.cli import main
@@ -164,3 +165,21 @@ def test_a_negative_seed_is_refused_by_name(command, capsys):
     with pytest.raises(SystemExit) as exit_:
         main([*command, "--seed", "-1"])
     assert exit_.value.code == 2 and "a seed is an integer >= 0, got -1" in capsys.readouterr().err
+
+
+def test_a_sequence_whose_views_cannot_be_rendered_fails_only_its_cells(kitti_copy, safl_home, tmp_path, capsys):
+    """Views are rendered for all cells first; a broken scan in one sequence fails that
+    sequence's cells, by file name, and the other sequence's cells complete."""
+    write_kitti(kitti_copy, "01", n=12, seed=1)
+    (kitti_copy / "sequences" / "01" / "velodyne" / "000005.bin").write_bytes(b"\0" * 10)
+    ids = ("Test/TinyBroken00-T1R1-v0", "Test/TinyBroken01-T1R1-v0")
+    for task_id, sequence in zip(ids, ("00", "01"), strict=True):
+        tasks.register(task_id, source="kitti", sequence=sequence, condition="T1R1", step=1,
+                       map_config=MapConfig(size=32))
+    try:
+        out = runner.run_cells(make_method("sad"), ids, options(kitti_copy, tmp_path))
+    finally:
+        for task_id in ids:
+            tasks.unregister(task_id)
+    assert [o.status for o in out] == ["computed", "failed"]
+    assert "000005.bin" in out[1].message and not out[1].path.exists()
