@@ -1,9 +1,11 @@
-"""Running a method over benchmark cells (method × task × seed) into result records.
+"""Running methods over benchmark cells (method × task × seed) into result records.
 
 A cell whose record exists with the same configuration is reused; a corrupt record is reported by
 name and recomputed; a record made with other settings (method parameters or weights, matcher,
-task definition) is recomputed and replaced. Records are written atomically as each cell
-finishes, so an interrupted run resumes where it stopped.
+task definition) is recomputed and replaced. The views of the cells to compute are rendered
+first, one pass over the scans per sequence. Records are written atomically as each cell
+finishes (in a parallel run, each evaluation is kept on disk as it comes back from a worker),
+so an interrupted run resumes where it stopped.
 
 The seed of a cell is the seed of the queries' viewpoint noise (the registered task's seed unless
 `--seed` gives another); the record keeps the registered task's fingerprint so records of several
