@@ -108,13 +108,18 @@ def _same_run(method: MethodInfo, task: TaskInfo, matcher: dict[str, Any], want_
     return ""
 
 
+def _seed(registered: TaskSpec, options: RunOptions) -> int:
+    """The noise seed of a cell: `options.seed`, else the registered task's own."""
+    return registered.seed if options.seed is None else int(options.seed)
+
+
 def _existing(
     method: Method, task_id: str, options: RunOptions, log: Callable[[str], None]
 ) -> tuple[int, CellOutcome | EvaluatedCell | None]:
     """(seed, what already exists of the cell): its reusable record as an outcome, or the
     evaluation an interrupted parallel run left untimed, or None when it must be computed."""
     registered = spec(task_id)
-    seed = registered.seed if options.seed is None else int(options.seed)
+    seed = _seed(registered, options)
     info = method_info(method)
     path = record_path(options.results_dir, info.name, info.version, registered.id, seed)
     if options.force:
@@ -292,7 +297,7 @@ def run_grid(
 
     def failed(i: int, message: str) -> CellOutcome:
         method, task_id, opts = cells[i]
-        seed = spec(task_id).seed if opts.seed is None else opts.seed
+        seed = _seed(spec(task_id), opts)
         path = record_path(opts.results_dir, method.name, method.version, task_id, seed)
         label = task_id if len(methods) == 1 else f"{method.name} on {task_id}"
         say(f"error: {label}{'' if opts.seed is None else f' (seed {seed})'}: {message}")
