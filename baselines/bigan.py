@@ -86,6 +86,11 @@ class BiGAN(AdversarialMethod):
             init_weights(net)
         return nets
 
+    @property
+    def input_size(self) -> int:
+        """The networks take `image_size` x `image_size` maps."""
+        return self.image_size
+
     def build_optimizers(self) -> dict[str, torch.optim.Optimizer]:
         betas = (self.beta1, 0.999)
         gen_params = [*self.nets["encoder"].parameters(), *self.nets["decoder"].parameters()]

@@ -174,6 +174,11 @@ class StableAFL(AdversarialMethod):
     def batches_per_step(self) -> int:
         return self.critic_steps
 
+    @property
+    def input_size(self) -> int:
+        """The networks take `image_size` x `image_size` maps."""
+        return self.image_size
+
     def _side_nets(self) -> list[str]:
         return ["data_side"] + (["code_side"] if self.code_side else [])
 

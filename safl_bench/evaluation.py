@@ -3,7 +3,8 @@
 This is the batch evaluation that every result record comes from. Both matching modes run on
 the same difference matrix: the shared SeqSLAM matcher ("sequence") and the nearest database
 frame ("single_frame"), so a reader sees what the sequence search adds. Revisit tasks restrict
-each query to the database frames it may match (`GroundTruth.db_limit`).
+each query to the database frames it may match (`GroundTruth.db_limit`). Single-frame results
+also carry Recall@N (`RECALL_AT`), the retrieval literature's measure, from the same matrix.
 """
 
 from __future__ import annotations
@@ -18,10 +19,12 @@ from safl_bench.errors import DataError
 from safl_bench.groundtruth import EXCLUDED, TP, GroundTruth
 from safl_bench.matching import MatcherConfig, MatchResult, match
 from safl_bench.method import Method
-from safl_bench.metrics import Metrics, evaluate
+from safl_bench.metrics import Metrics, evaluate, retrieval_recall
 
 #: The matching modes every evaluation reports, in the order tables show them.
 MODES = ("sequence", "single_frame")
+#: The N of the Recall@N that single-frame results report.
+RECALL_AT = (1, 5, 10)
 
 
 @dataclass(frozen=True)
@@ -106,4 +109,6 @@ def evaluate_method(
         matches[mode] = match(D, cfg.matcher(mode), db_limit=limit)
         seconds[mode] = time.perf_counter() - t0
     metrics = {mode: score_matches(truth, matches[mode]) for mode in MODES}
+    metrics["single_frame"].recall_at_n = retrieval_recall(
+        D, truth.has_loop, lambda q, j: truth.label_of(q, j) == TP, RECALL_AT, db_limit=limit)
     return Evaluation(matches, metrics, describe_s, n, seconds["sequence"])

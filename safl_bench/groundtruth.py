@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from safl_bench import kitti
 from safl_bench.errors import ConfigError, DataError
+from safl_bench.sources import kitti
 
 #: Labels of an answered match (`GroundTruth.labels`).
 TP, EXCLUDED, FP = 1, 0, -1

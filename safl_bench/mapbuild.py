@@ -14,9 +14,9 @@ import numpy as np
 from tqdm import tqdm
 
 from safl_bench.errors import ConfigError
-from safl_bench.kitti import KittiSequence
 from safl_bench.localmap import make_local_map
 from safl_bench.mapconfig import MapConfig
+from safl_bench.sources.kitti import KittiSequence
 from safl_bench.topview import encode, noisy_viewpoints, pose_viewpoint, render, view_points
 
 KINDS = ("topview", "points")

@@ -12,6 +12,8 @@ workers made, in frame order, as members part-0000.npz, part-0001.npz, ... (each
 `.npz` of the arrays above for its frames) beside `meta`; it loads to the same views.
 
 Tasks call `load_views`; `prepare` renders many conditions and kinds in one pass over the scans.
+Sources whose views are cheaper to render than to read back (`DataSource.cache_views` false: an
+image folder) are not cached here: `load_views` renders them each time and `prepare` does nothing.
 """
 
 from __future__ import annotations
@@ -27,14 +29,14 @@ from typing import Any
 import numpy as np
 
 from safl_bench.atomic import atomic_path
-from safl_bench.datasource import DataSource
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.fingerprint import fingerprint, to_jsonable
-from safl_bench.mapbuild import KINDS, build_views, check_frames
+from safl_bench.mapbuild import KINDS, check_frames
 from safl_bench.mapconfig import MapConfig
 from safl_bench.noise import Condition, sample_offsets
 from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.paths import map_cache_dir
+from safl_bench.sources import DataSource
 
 CACHE_VERSION = 1  # bump when the rendering code changes what a key's file holds
 #: per view kind, bumped when only that kind's rendering changes (points 2: cropped to the
@@ -43,7 +45,7 @@ KIND_VERSIONS = {"topview": 1, "points": 2}
 
 
 def cache_key(
-    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    source: DataSource, sequence: str, config: MapConfig | None, frames: np.ndarray,
     condition: Condition, seed: int, kind: str,
 ) -> str:
     """The cache key of one set of views."""
@@ -56,7 +58,7 @@ def cache_key(
 
 
 def cache_path(
-    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    source: DataSource, sequence: str, config: MapConfig | None, frames: np.ndarray,
     condition: Condition, seed: int, kind: str,
 ) -> Path:
     """Where the views of that key are (or will be) cached."""
@@ -64,7 +66,7 @@ def cache_path(
     return map_cache_dir() / f"{source.kind}-{sequence}" / f"{kind}-{condition.name}-{key}.npz"
 
 
-def _meta(source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+def _meta(source: DataSource, sequence: str, config: MapConfig | None, frames: np.ndarray,
           condition: Condition, seed: int, kind: str) -> str:
     return json.dumps(to_jsonable({
         "source": source.label, "root": str(source.root), "sequence": sequence, "config": config,
@@ -139,7 +141,7 @@ def _check_kind(kind: str) -> None:
 def prepare(
     source: DataSource,
     sequence: str,
-    config: MapConfig,
+    config: MapConfig | None,
     *,
     frames: np.ndarray,
     conditions: Iterable[Condition],
@@ -172,7 +174,7 @@ class _Plan:
     meta: dict[tuple[Condition, str], str]
 
 
-def _plan(source: DataSource, sequence: str, frames: np.ndarray, config: MapConfig,
+def _plan(source: DataSource, sequence: str, frames: np.ndarray, config: MapConfig | None,
           conds: list[Condition], seed: int, kinds: Sequence[str]) -> _Plan:
     frames = check_frames(frames, len(source.sequence(sequence)), sequence)
     paths = {(c, k): cache_path(source, sequence, config, frames, c, seed, k) for c in conds for k in kinds}
@@ -189,7 +191,7 @@ def _plan(source: DataSource, sequence: str, frames: np.ndarray, config: MapConf
 def prepare_sequences(
     source: DataSource,
     frames: Mapping[str, np.ndarray],
-    config: MapConfig,
+    config: MapConfig | None,
     *,
     conditions: Iterable[Condition],
     seed: int,
@@ -205,13 +207,15 @@ def prepare_sequences(
     conds = list(dict.fromkeys(conditions))
     for kind in kinds:
         _check_kind(kind)
+    if not source.cache_views:
+        return {str(name): {} for name in frames}
     plans = [_plan(source, str(name), f, config, conds, seed, kinds) for name, f in frames.items()]
     todo = [plan for plan in plans if plan.missing]
     serially = parallel is None or parallel.serial
     for plan in todo:
         if serially or len(plan.frames) < 2:
-            views = build_views(source.sequence(plan.sequence), config, plan.frames, plan.offsets,
-                                plan.kinds, progress=progress)
+            views = source.build_views(plan.sequence, config, plan.frames, plan.offsets, plan.kinds,
+                                       progress=progress)
             for c, k in plan.missing:
                 _save(plan.paths[c, k], views[c.name, k], plan.meta[c, k])
     if parallel is not None and not serially:
@@ -220,16 +224,16 @@ def prepare_sequences(
 
 
 def _build_chunk(
-    source: DataSource, sequence: str, config: MapConfig, frames: np.ndarray,
+    source: DataSource, sequence: str, config: MapConfig | None, frames: np.ndarray,
     offsets: dict[str, np.ndarray | None], kinds: Sequence[str],
 ) -> dict[tuple[str, str], bytes]:
     """One chunk of `prepare`'s views, compressed (runs on a worker: the compression, as costly
     as the rendering, is spread over the workers, and only compressed bytes travel back)."""
-    views = build_views(source.sequence(sequence), config, frames, offsets, kinds, progress=False)
+    views = source.build_views(sequence, config, frames, offsets, kinds, progress=False)
     return {key: _compress(value) for key, value in views.items()}
 
 
-def _build_chunked(source: DataSource, config: MapConfig, plans: Sequence[_Plan], parallel: Parallel,
+def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence[_Plan], parallel: Parallel,
                    progress: bool) -> None:
     """Render the plans' views in chunks on the workers; write each plan's files (its compressed
     chunks, in frame order) once all its chunks are in."""
@@ -283,7 +287,7 @@ def _build_chunked(source: DataSource, config: MapConfig, plans: Sequence[_Plan]
 def load_views(
     source: DataSource,
     sequence: str,
-    config: MapConfig,
+    config: MapConfig | None,
     *,
     frames: np.ndarray,
     condition: Condition,
@@ -295,6 +299,12 @@ def load_views(
     rendered and cached: (F, size, size) float32 in [0, 1] for "topview", or a list of F
     (M_i, 3) float32 viewpoint-frame point arrays for "points"."""
     _check_kind(kind)
+    if not source.cache_views:
+        n = len(source.sequence(sequence))
+        frames = check_frames(frames, n, sequence)
+        offsets = None if condition.is_clean else sample_offsets(len(frames), condition, seed)
+        return source.build_views(sequence, config, frames, {condition.name: offsets}, [kind],
+                                  progress=progress)[condition.name, kind]
     paths = prepare(source, sequence, config, frames=frames, conditions=[condition], seed=seed,
                     kinds=[kind], progress=progress)
     return _load(paths[condition, kind], kind)

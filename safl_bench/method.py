@@ -75,6 +75,25 @@ def as_points(views: Any, *, what: str = "views") -> list[np.ndarray]:
     return out
 
 
+def method_input(method: Method, views: Any) -> Any:
+    """`views` as `method` takes them: top views resampled to its `input_size` (bilinear,
+    antialiased; `safl_bench.resample.fit_input`), anything else unchanged."""
+    if method.input_kind != "topview" or method.input_size is None:
+        return views
+    from safl_bench.resample import fit_input
+
+    return fit_input(np.asarray(views), method.input_size)
+
+
+def input_note(method: Method, views: Any) -> str | None:
+    """What `method_input` does to `views`, for records (None when it changes nothing)."""
+    size = method.input_size if method.input_kind == "topview" else None
+    shape = np.shape(views)[1:]
+    if size is None or shape == (size, size):
+        return None
+    return f"{shape[0]}x{shape[1]} views resampled to {size}x{size} (bilinear, antialiased)"
+
+
 class Method:
     """Base class of descriptor methods. Subclass, set `name`/`version`, implement `describe`."""
 
@@ -88,6 +107,12 @@ class Method:
     runtime_params: ClassVar[tuple[str, ...]] = ()
     #: Where the learned state came from (set by `load` / `make_method`); recorded in `config()`.
     weights_info: dict[str, Any] | None = None
+
+    @property
+    def input_size(self) -> int | None:
+        """Side of the square top view the method takes, None for any size: the harness resamples
+        views of another size to it (`method_input`) and records that it did."""
+        return None
 
     # -- the contract ---------------------------------------------------------------------------
     def fit(self, maps: Views) -> Self:

@@ -89,6 +89,10 @@ class Metrics:
     extended_precision: float
     f1_max: float
     notes: list[str] = field(default_factory=list)
+    #: fraction of queries with a true place whose reported match is one (None: no such query)
+    recall_at_1: float | None = None
+    #: {N: fraction with a true place among the N nearest database frames} (`retrieval_recall`)
+    recall_at_n: dict[int, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -137,6 +141,7 @@ def evaluate(
         raise DataError("a query is marked correct but has no true place")
     notes: list[str] = []
 
+    correct_all, has_true_all = correct & np.isfinite(conf), has_true
     conf, correct, has_true = conf[ok], correct[ok], has_true[ok]
     n_valid = int(ok.sum())
     n_pos = int(has_true.sum())
@@ -183,13 +188,43 @@ def evaluate(
             fpr, tpr, roc_thr = roc_curve(correct, roc_conf)
             roc_auc = float(roc_auc_score(correct, roc_conf))
 
+    # Recall@1: every query with a true place, valid or not (a match in the excluded band is no
+    # true place), as the retrieval literature counts it
+    n_true = int(has_true_all.sum())
+    recall_at_1 = float((correct_all & has_true_all).sum() / n_true) if n_true else None
     return Metrics(
+        recall_at_1=recall_at_1,
         n_queries=n, n_valid=n_valid, n_positive=n_pos, n_correct=int(correct.sum()),
         n_claimed=int(claimed.sum()), precision=precision, recall=recall, thresholds=thr,
         fpr=fpr, tpr=tpr, roc_thresholds=roc_thr, roc_auc=roc_auc,
         recall_at_100=recall_at_100, precision_level=float(precision_level),
         recall_at_precision=recall_at_level, precision_at_min_recall=p_r0,
         extended_precision=(p_r0 + recall_at_100) / 2, f1_max=f1_max, notes=notes)
+
+
+def retrieval_recall(D: np.ndarray, has_true_place: np.ndarray, is_true: Any,
+                     ns: tuple[int, ...] = (1, 5, 10), db_limit: np.ndarray | None = None) -> dict[int, float]:
+    """Recall@N, the field's retrieval metric: the fraction of queries with a true place that
+    have one among the N database frames nearest in descriptor distance (`D`, (Nq, Ndb), lower =
+    nearer), each query ranking only the frames it may match (j < db_limit[i]).
+    `is_true(queries, matches)` says elementwise whether a database frame is a true place.
+    Empty when no query has a true place."""
+    D = np.asarray(D, dtype=np.float64)
+    ndb = D.shape[1]
+    queries = np.flatnonzero(np.asarray(has_true_place, dtype=bool))
+    if not len(queries) or not ndb:
+        return {}
+    if db_limit is not None:
+        D = np.where(np.arange(ndb)[None, :] < np.asarray(db_limit)[:, None], D, np.inf)
+    k = min(max(ns), ndb)
+    sub = D[queries]
+    top = np.argpartition(sub, k - 1, axis=1)[:, :k] if k < ndb else np.tile(np.arange(ndb), (len(queries), 1))
+    order = np.take_along_axis(sub, top, axis=1).argsort(axis=1, kind="stable")
+    top = np.take_along_axis(top, order, axis=1)
+    ranked = np.take_along_axis(sub, top, axis=1)
+    hit = np.asarray(is_true(np.repeat(queries, k).reshape(-1, k), top), dtype=bool) & np.isfinite(ranked)
+    first = np.where(hit.any(axis=1), hit.argmax(axis=1), k)
+    return {n: float((first < n).mean()) for n in ns}
 
 
 # --------------------------------------------------------------------------- labels

@@ -47,11 +47,11 @@ def run(
 ) -> dict[str, Any]:
     """Every figure, JSON-ready. `root`: a KITTI-layout root holding `sequence`."""
     from safl_bench import mapcache, runner
-    from safl_bench.datasource import kitti_source
     from safl_bench.mapbuild import select_frames
     from safl_bench.mapconfig import MapConfig
     from safl_bench.method_registry import make_method
     from safl_bench.noise import CLEAN, PAPER_CONDITIONS
+    from safl_bench.sources import kitti_source
     from safl_bench.tasks import register, registry, unregister
 
     if workers < 2:

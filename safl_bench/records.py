@@ -38,8 +38,8 @@ if TYPE_CHECKING:
 SCHEMA_VERSION = 1
 #: Matching modes a record may hold; "sequence" is SeqSLAM, "single_frame" nearest neighbour.
 MODES: tuple[str, ...] = ("sequence", "single_frame")
-PROTOCOLS: tuple[str, ...] = ("paper", "revisit")
-SOURCE_KINDS: tuple[str, ...] = ("synth", "kitti")
+PROTOCOLS: tuple[str, ...] = ("paper", "revisit", "bevplace")
+SOURCE_KINDS: tuple[str, ...] = ("synth", "kitti", "bev")
 #: Curves are stored with at most this many points (plots only; metrics are exact values).
 MAX_CURVE_POINTS = 200
 RESULTS_ENV = "SAFL_RESULTS"
@@ -95,6 +95,10 @@ class Metrics:
     """Scalar metrics of one matching mode. Rates are fractions in [0, 1].
 
     A rate is None only where it is undefined (no positives in the task).
+    recall_at_1: the fraction of queries with a true place whose reported (top-1) match is one;
+    recall_at_n: {"N": fraction} of those with a true place among the N nearest database frames
+    (single-frame mode only: the sequence matcher reports one match). Both are None in records
+    made before they were measured.
     """
 
     recall_at_100_precision: float | None
@@ -103,6 +107,8 @@ class Metrics:
     extended_precision: float | None
     n_queries: int
     n_positives: int
+    recall_at_1: float | None = None
+    recall_at_n: dict[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -244,6 +250,9 @@ def mode_result_from_evaluation(evaluation: Evaluation) -> ModeResult:
             extended_precision=float(evaluation.extended_precision),
             n_queries=int(evaluation.n_queries),
             n_positives=int(evaluation.n_positive),
+            recall_at_1=evaluation.recall_at_1,
+            recall_at_n=({str(n): float(v) for n, v in evaluation.recall_at_n.items()}
+                         if evaluation.recall_at_n else None),
         ),
         precision=evaluation.precision,
         recall=evaluation.recall,
@@ -558,6 +567,18 @@ class _Reader:
     def dict_(self, value: Any, where: str) -> dict[str, Any]:
         return self.obj(value, where)
 
+    def rates(self, value: Any, where: str) -> dict[str, float] | None:
+        """None, or {"N": fraction} with N a positive integer."""
+        if value is None:
+            return None
+        out: dict[str, float] = {}
+        for key, rate in self.obj(value, where).items():
+            number = self.rate(rate, f"{where}.{key}")
+            if not key.isdigit() or int(key) < 1 or number is None:
+                raise self.fail(f"{where}.{key}", "expected a positive integer N and a fraction")
+            out[key] = number
+        return out
+
     def floats(self, value: Any, where: str) -> list[float]:
         if not isinstance(value, list):
             raise self.fail(where, f"expected a list, got {type(value).__name__}")
@@ -617,6 +638,8 @@ def _parse_mode(r: _Reader, data: Any, where: str) -> ModeResult:
         extended_precision=r.get(m, "extended_precision", mw, r.rate),
         n_queries=r.get(m, "n_queries", mw, r.int_),
         n_positives=r.get(m, "n_positives", mw, r.int_),
+        recall_at_1=r.rate(m.get("recall_at_1"), f"{mw}.recall_at_1"),
+        recall_at_n=r.rates(m.get("recall_at_n"), f"{mw}.recall_at_n"),
     )
     c = r.get(d, "curves", where, r.dict_)
     cw = f"{where}.curves"

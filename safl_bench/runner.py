@@ -23,7 +23,7 @@ from typing import Any
 
 from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method
-from safl_bench.method import Method
+from safl_bench.method import Method, input_note, method_input
 from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.records import (
     CorruptRecordError,
@@ -56,6 +56,8 @@ class RunOptions:
     seed: int | None = None  # None: each task's registered seed
     force: bool = False
     kitti_root: str | None = None
+    bev_root: str | None = None
+    bev_resolution_m: float | None = None  # None: the source's default (0.4 m per pixel)
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
     timing_frames: int = 20
     timing_repeats: int = 5
@@ -75,13 +77,13 @@ class CellOutcome:
     method: str = ""  # the method's name
 
 
-def resolve_tasks(items: Sequence[str], *, kitti: bool = False) -> list[str]:
+def resolve_tasks(items: Sequence[str], *, source: str = "synth") -> list[str]:
     """Task ids from ids and suite names ('paper', 'revisit', 'all', ...), in order, no repeats.
 
-    Suites pick the KITTI tasks when `kitti` is true, else the embedded default's. No items means
-    the 'paper' suite.
+    Suites pick the tasks on `source` ("synth", the embedded default; "kitti"; "bev", top-view
+    images); the 'bev-...' suites are top-view image tasks whatever `source`. No items means the
+    'paper' suite.
     """
-    source = "kitti" if kitti else "synth"
     out: list[str] = []
     for item in items or ["paper"]:
         ids = [spec(item).id] if "/" in item or item in registry else suite(item, source)
@@ -151,7 +153,8 @@ def _existing(
 
 def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool) -> Task:
     run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
-    return Task.from_spec(run_spec, kitti_root=options.kitti_root, progress=progress)
+    return Task.from_spec(run_spec, kitti_root=options.kitti_root, bev_root=options.bev_root,
+                          bev_resolution_m=options.bev_resolution_m, progress=progress)
 
 
 def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunOptions,
@@ -166,17 +169,22 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
               where: str) -> EvaluatedCell:
     kind = method.input_kind
     task.prepare([kind])
+    queries, database = task.queries(kind), task.database(kind)
     evaluation = evaluate_method(
-        method, task.queries(kind), task.database(kind), task.truth,
+        method, method_input(method, queries), method_input(method, database), task.truth,
         config=options.evaluation, revisit=task.spec.protocol == "revisit",
     )
     data = task.info()
+    extra = {key: data[key] for key in ("data_notes",) if key in data}
+    note = input_note(method, database)
+    if note is not None:
+        extra["method_input"] = note
     return EvaluatedCell(
         method=method_info(method),
         task=task_info(
             registered, task.source.label if task.source is not None else task.spec.source,
             data_fingerprint=data.get("data_fingerprint"),
-            n_queries=data["n_queries"], n_database=data["n_database"],
+            n_queries=data["n_queries"], n_database=data["n_database"], **extra,
         ),
         seed=task.spec.seed,
         matcher=options.evaluation.to_dict(),
@@ -195,7 +203,7 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
     already has it (its views are loaded), else it is opened again."""
     if task is None:
         task = _task(spec(cell.task.id), cell.seed, options, progress=False)
-    queries = task.queries(method.input_kind)
+    queries = method_input(method, task.queries(method.input_kind))
     with pinned() as how_pinned:
         batch1 = time_describe(
             method, queries, batch_size=1, frames=options.timing_frames,
@@ -407,12 +415,13 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     by_method = len({o.method for o in outcomes}) > 1
     by_seed = len({o.seed for o in outcomes}) > 1
     lead = (("method",) if by_method else ()) + ("task",) + (("seed",) if by_seed else ())
-    header = (*lead, "R@100%P", "AUC", "F1max", "R@100%P 1-frame", "ms/frame", "record")
+    header = (*lead, "R@100%P", "AUC", "F1max", "R@100%P 1-frame", "R@1 1-frame", "ms/frame",
+              "record")
     rows: list[tuple[str, ...]] = []
     for o in outcomes:
         key = ((o.method,) if by_method else ()) + (o.task_id,) + ((str(o.seed),) if by_seed else ())
         if o.record is None:
-            rows.append((*key, "—", "—", "—", "—", "—", f"failed: {o.message}"))
+            rows.append((*key, "—", "—", "—", "—", "—", "—", f"failed: {o.message}"))
             continue
         seq = o.record.results["sequence"].metrics
         single = o.record.results["single_frame"].metrics
@@ -422,6 +431,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
             "—" if seq.auc is None else f"{seq.auc:.3f}",
             f"{seq.f1_max:.3f}",
             _pct(single.recall_at_100_precision),
+            _pct(single.recall_at_1),
             f"{o.record.timings.describe_ms_per_frame:.2f}",
             o.status,
         ))

@@ -10,7 +10,7 @@ import pytest
 from conftest import lidar_poses
 
 from safl_bench.errors import DataError
-from safl_bench.kitti import open_sequence
+from safl_bench.sources.kitti import open_sequence
 
 
 def test_reader_matches_pykitti(kitti_root: Path) -> None:

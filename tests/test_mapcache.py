@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from safl_bench import mapcache
-from safl_bench.datasource import kitti_source
 from safl_bench.errors import ConfigError
 from safl_bench.mapbuild import build_views, select_frames
 from safl_bench.mapconfig import MapConfig
 from safl_bench.noise import CLEAN, Condition
+from safl_bench.sources import kitti_source
 
 FRAMES = np.array([3, 7, 11])
 T5 = Condition(5.0, 1.0)
@@ -30,7 +30,7 @@ def test_load_views_then_cache_hit(kitti_root: Path, safl_home: Path, monkeypatc
     def fail(*args: object, **kwargs: object) -> None:
         raise AssertionError("rendered again instead of reading the cache")
 
-    monkeypatch.setattr(mapcache, "build_views", fail)
+    monkeypatch.setattr("safl_bench.mapbuild.build_views", fail)
     again = mapcache.load_views(source, "00", MapConfig(), frames=FRAMES, condition=T5, seed=1, progress=False)
     np.testing.assert_array_equal(maps, again)
 
@@ -118,7 +118,7 @@ def test_synth_source_calls_ensure_and_keys_on_manifest(
     from conftest import write_kitti
 
     from safl_bench import synth
-    from safl_bench.datasource import resolve_source
+    from safl_bench.sources import resolve_source
     from safl_bench.synth.writer import manifest_path
 
     calls = []

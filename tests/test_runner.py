@@ -136,7 +136,7 @@ def test_cli_run_bad_input_is_one_line(tiny_tasks, tmp_path, capsys):
 def test_resolve_tasks_expands_suites():
     paper = runner.resolve_tasks([])
     assert len(paper) == 12 and all(t.startswith("SAFL/Synth00-") for t in paper)
-    kitti = runner.resolve_tasks(["paper"], kitti=True)
+    kitti = runner.resolve_tasks(["paper"], source="kitti")
     assert all(t.startswith("SAFL/KITTI00-") for t in kitti)
     mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v0", "paper"])
     assert mixed[0] == "SAFL/Synth00-T1R1-v0" and len(mixed) == 12
@@ -145,16 +145,16 @@ def test_resolve_tasks_expands_suites():
 def test_the_views_of_all_cells_are_rendered_in_one_pass(tiny_tasks, kitti_root, tmp_path, monkeypatch):
     """Cells on one sequence share one pass over the scans for all their conditions (the clean
     database and every query condition), not one pass each."""
-    from safl_bench import mapcache
+    from safl_bench import mapbuild
 
     passes: list[list[str]] = []
-    real = mapcache.build_views
+    real = mapbuild.build_views
 
     def counted(seq, config, frames, offsets, kinds, progress=True):  # type: ignore[no-untyped-def]
         passes.append(sorted(offsets))
         return real(seq, config, frames, offsets, kinds, progress=progress)
 
-    monkeypatch.setattr(mapcache, "build_views", counted)
+    monkeypatch.setattr(mapbuild, "build_views", counted)
     out = runner.run_cells(make_method("sad"), tiny_tasks, options(kitti_root, tmp_path))
     assert [o.status for o in out] == ["computed", "computed"]
     assert passes == [["T0R0", "T1R1", "T5R1"]]

@@ -174,7 +174,7 @@ def test_train_command(tmp_path, monkeypatch, capsys, tiny_val_task):
 
     maps = sample_views("topview", n=12)
     monkeypatch.setattr(train_cli, "load_training_maps", lambda *a, **k: (maps, {"01": 12}))
-    monkeypatch.setattr("safl_bench.datasource.synth_source", lambda *a, **k: _FakeSource())
+    monkeypatch.setattr("safl_bench.sources.synth_source", lambda *a, **k: _FakeSource())
     out = tmp_path / "run"
     argv = ["train", "--method", "stable_afl", "--epochs", "1", "--batch-size", "2", "--out", str(out),
             "--no-progress", "--set", "width=4", "--set", "encoder_width=4", "--set", "code_size=16", "--set", "hidden=16",

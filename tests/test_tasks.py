@@ -60,6 +60,7 @@ def test_builtin_suites_cover_the_paper_and_revisit() -> None:
         "SAFL/KITTI00-Revisit-v0",
         "SAFL/KITTI05-Revisit-v0",
         "SAFL/KITTI08-Revisit-v0",
+        *(f"SAFL/BEVKITTI{seq}-Revisit-v0" for seq in ("00", "02", "05", "06")),
     }
     assert set(tasks.suite("all")) >= set(full_kitti) | set(tasks.suite("revisit"))
     spec = tasks.spec("SAFL/KITTI08-Revisit-v0")

@@ -78,7 +78,7 @@ def main(args: argparse.Namespace) -> int:
 def _parallel(args: argparse.Namespace) -> int:
     from safl_bench import parallel_bench
     from safl_bench.atomic import atomic_write_json
-    from safl_bench.datasource import resolve_source
+    from safl_bench.sources import resolve_source
 
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")

@@ -50,8 +50,8 @@ def parse_conditions(names: list[str]) -> list[Condition]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from safl_bench.datasource import resolve_source
     from safl_bench.mapcache import prepare_sequences
+    from safl_bench.sources import resolve_source
 
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")

@@ -79,7 +79,7 @@ def main(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from safl_bench.kitti import open_sequence
+    from safl_bench.sources.kitti import open_sequence
 
     name = str(args.sequence)
     if args.scans < 1 or args.scans > 8:

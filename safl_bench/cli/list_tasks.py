@@ -9,7 +9,7 @@ from safl_bench.tasks.spec import TaskSpec
 
 HELP = "list the registered benchmark tasks (id, protocol, sequence, condition, source)"
 
-SOURCE_NAMES = {"synth": "synthetic default", "kitti": "KITTI"}
+SOURCE_NAMES = {"synth": "synthetic default", "kitti": "KITTI", "bev": "top-view images"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,7 +20,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=list(SUITES),
         help="only the tasks of a suite: " + "; ".join(f"{k}: {v}" for k, v in SUITES.items()),
     )
-    parser.add_argument("--source", choices=["synth", "kitti"], help="only tasks on this data")
+    parser.add_argument("--source", choices=list(SOURCE_NAMES), help="only tasks on this data")
     parser.add_argument(
         "--fingerprints", action="store_true", help="add each definition's fingerprint and details"
     )

@@ -50,3 +50,23 @@ def parallel_from(args: Any) -> Any:
     from safl_bench.parallel import Parallel
 
     return Parallel(workers=args.workers, ray_address=args.ray)
+
+
+def add_bev_arguments(parser: Any) -> None:
+    """--bev-root DIR and --bev-resolution M: the top-view image source (beside --kitti-root)."""
+    from safl_bench.sources import BEV_ROOT_ENV, DEFAULT_RESOLUTION_M
+
+    parser.add_argument("--bev-root", metavar="DIR",
+                        help="top-view image folders (BEVPlace's layout: SEQ/imgs/*.png, SEQ/pose.txt): "
+                             f"run their tasks (also ${BEV_ROOT_ENV}); not with --kitti-root")
+    parser.add_argument("--bev-resolution", type=float, default=DEFAULT_RESOLUTION_M, metavar="M",
+                        help="metres per pixel of those images (default %(default)s, BEVPlace's)")
+
+
+def source_kind(args: Any) -> str:
+    """The source the command's options select: "kitti", "bev" or "synth" (the default); both
+    --kitti-root and --bev-root is an error."""
+    from safl_bench.sources import real_roots
+
+    kitti, bev = real_roots(getattr(args, "kitti_root", None), getattr(args, "bev_root", None))
+    return "kitti" if kitti is not None else "bev" if bev is not None else "synth"

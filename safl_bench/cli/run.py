@@ -7,7 +7,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from safl_bench.cli.options import add_parallel_arguments, parallel_from, parse_key_values, seed
+from safl_bench.cli.options import (
+    add_bev_arguments,
+    add_parallel_arguments,
+    parallel_from,
+    parse_key_values,
+    seed,
+    source_kind,
+)
 
 HELP = (
     "Run methods on benchmark tasks (default: the paper's twelve conditions on the embedded "
@@ -26,6 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="task id or suite (paper, paper-full, revisit, sanity, all); repeatable; default: paper",
     )
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
+    add_bev_arguments(parser)
     parser.add_argument("--seed", type=seed, action="append",
                         help="seed of the query noise (default: the task's own); repeatable")
     parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")
@@ -77,7 +85,7 @@ def main(args: argparse.Namespace) -> int:
     names = list(dict.fromkeys(args.method))
     if len(names) > 1 and (args.weights or args.param):
         raise ConfigError("--weights and --param apply to one method: give them with a single --method")
-    task_ids = resolve_tasks(args.task, kitti=args.kitti_root is not None)
+    task_ids = resolve_tasks(args.task, source=source_kind(args))
     methods = [make_method(name, weights=args.weights, **parse_key_values(args.param, "--param"))
                for name in names]
     seeds = list(dict.fromkeys(args.seed)) if args.seed else [None]
@@ -86,6 +94,8 @@ def main(args: argparse.Namespace) -> int:
         seed=seeds[0],
         force=args.force,
         kitti_root=args.kitti_root,
+        bev_root=args.bev_root,
+        bev_resolution_m=args.bev_resolution,
         evaluation=EvaluationConfig(matcher_config(args.score, args.matcher)),
         progress=not args.quiet,
     )

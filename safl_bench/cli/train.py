@@ -112,8 +112,8 @@ def main(args: argparse.Namespace) -> int:
     import torch
 
     from safl_bench import paths, provenance
-    from safl_bench.datasource import kitti_source, synth_source
     from safl_bench.method_registry import method_class
+    from safl_bench.sources import kitti_source, synth_source
     from safl_bench.training import CHECKPOINT, AdversarialMethod, save_reconstructions
 
     cls = method_class(args.method)

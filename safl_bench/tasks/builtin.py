@@ -12,12 +12,21 @@ than 30 s older, true positive within 3 m, false positive beyond 20 m. On KITTI 
 (the sequences with many revisits; 08 revisits in the opposite direction) and on the synthetic
 test sequences.
 
+Top-view image folders (real KITTI through BEVPlace's published images, `SAFL/BEVKITTI00-...`):
+the revisit protocol on 00, 02, 05 and 06; BEVPlace's own protocol (`-BEVPlace-v0`, from its
+`dataset.py`: fixed database and query frame ranges per sequence, every frame, a true place
+within 5 m, scored by Recall@1); and the paper's twelve conditions on 00, whose noisy queries
+are the images resampled to the moved viewpoint (there are no points to re-render: nearest
+neighbour, what comes from outside the image is empty; at T20 up to a third of a 60.4 m wide
+view along the shift, see `safl_bench.resample`).
+
 Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
 """
 
 from __future__ import annotations
 
 from safl_bench.errors import RegistryError
+from safl_bench.mapconfig import MapConfig
 from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition
 from safl_bench.tasks.registry import register
 from safl_bench.tasks.spec import TaskSpec
@@ -32,16 +41,31 @@ REVISIT_FP_RADIUS_M = 20.0
 
 #: Test sequences of the paper protocol; the first is the default test sequence.
 PAPER_SEQUENCES = ("00", "09")
-REVISIT_SEQUENCES = {"synth": ("00", "09"), "kitti": ("00", "05", "08")}
-SOURCE_LABEL = {"synth": "Synth", "kitti": "KITTI"}
+REVISIT_SEQUENCES = {"synth": ("00", "09"), "kitti": ("00", "05", "08"), "bev": ("00", "02", "05", "06")}
+SOURCE_LABEL = {"synth": "Synth", "kitti": "KITTI", "bev": "BEVKITTI"}
+#: Sequences of the paper protocol per source (the top-view images: KITTI 00 only).
+PAPER_SOURCE_SEQUENCES = {"synth": PAPER_SEQUENCES, "kitti": PAPER_SEQUENCES, "bev": ("00",)}
+#: BEVPlace's protocol (its dataset.py): [start, stop) database and query frames per sequence.
+BEVPLACE_RANGES = {
+    "00": ((0, 3000), (3200, 4541)),
+    "02": ((0, 3400), (3600, 4661)),
+    "05": ((0, 1000), (1200, 2751)),
+    "06": ((0, 600), (800, 1101)),
+}
+BEVPLACE_TP_RADIUS_M = 5.0
 
 SUITES = {
     "paper": "the paper's twelve conditions on the default test sequence 00",
     "paper-full": "the paper's twelve conditions on both test sequences 00 and 09",
     "revisit": "loop closure within one sequence (revisit protocol)",
     "sanity": "clean T0R0 re-render tasks (queries equal the database)",
+    "bev-revisit": "revisit protocol on the top-view images of KITTI 00, 02, 05, 06 (--bev-root)",
+    "bev-bevplace": "BEVPlace's protocol on the top-view images of KITTI 00, 02, 05, 06 (--bev-root)",
+    "bev-paper": "the paper's twelve conditions on the top-view images of KITTI 00 (--bev-root)",
     "all": "every built-in task",
 }
+#: Suites of one source only: they ignore the source a command's options select.
+SOURCE_SUITES = {"bev-revisit": "bev", "bev-bevplace": "bev", "bev-paper": "bev"}
 
 _BUILTIN: dict[str, list[str]] = {name: [] for name in SUITES}
 
@@ -56,8 +80,16 @@ def revisit_id(source: str, sequence: str, version: int = 0) -> str:
     return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-Revisit-v{version}"
 
 
+def bevplace_id(source: str, sequence: str, version: int = 0) -> str:
+    """Id of a BEVPlace-protocol task, e.g. SAFL/BEVKITTI02-BEVPlace-v0."""
+    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-BEVPlace-v{version}"
+
+
 def _paper(source: str, sequence: str, condition: Condition) -> TaskSpec:
     what = "clean re-render (sanity)" if condition.is_clean else f"viewpoint noise {condition.name}"
+    if source == "bev" and not condition.is_clean:
+        what += (" (queries: the images resampled to the moved viewpoint, nearest neighbour; "
+                 "what lies beyond the image is empty)")
     return TaskSpec(
         id=paper_id(source, sequence, condition),
         source=source,
@@ -68,6 +100,7 @@ def _paper(source: str, sequence: str, condition: Condition) -> TaskSpec:
         tp_radius_m=PAPER_TP_RADIUS_M,
         fp_radius_m=PAPER_TP_RADIUS_M,
         description=f"paper protocol, {what}",
+        map_config=None if source == "bev" else MapConfig(),
     )
 
 
@@ -82,6 +115,25 @@ def _revisit(source: str, sequence: str) -> TaskSpec:
         fp_radius_m=REVISIT_FP_RADIUS_M,
         window_s=REVISIT_WINDOW_S,
         description="revisit protocol, loop closure within the sequence",
+        map_config=None if source == "bev" else MapConfig(),
+    )
+
+
+def _bevplace(source: str, sequence: str) -> TaskSpec:
+    database, queries = BEVPLACE_RANGES[sequence]
+    return TaskSpec(
+        id=bevplace_id(source, sequence),
+        source=source,
+        sequence=sequence,
+        protocol="bevplace",
+        step=1,
+        database_frames=database,
+        query_frames=queries,
+        tp_radius_m=BEVPLACE_TP_RADIUS_M,
+        fp_radius_m=BEVPLACE_TP_RADIUS_M,
+        description=(f"BEVPlace's protocol: database frames {database[0]}-{database[1] - 1}, queries "
+                     f"{queries[0]}-{queries[1] - 1}, a true place within 5 m, Recall@1"),
+        map_config=None if source == "bev" else MapConfig(),
     )
 
 
@@ -95,21 +147,26 @@ def register_builtin() -> None:
     """Register every built-in task (once; `import safl_bench` does it)."""
     if _BUILTIN["all"]:
         return
-    for source in ("synth", "kitti"):
-        for sequence in PAPER_SEQUENCES:
+    for source in ("synth", "kitti", "bev"):
+        bev = ("bev-paper",) if source == "bev" else ()
+        sequences = PAPER_SOURCE_SEQUENCES[source]
+        for sequence in sequences:
             for condition in PAPER_CONDITIONS:
-                default = ("paper",) if sequence == PAPER_SEQUENCES[0] else ()
-                _add((*default, "paper-full"), _paper(source, sequence, condition))
-        for sequence in PAPER_SEQUENCES:
+                default = ("paper",) if sequence == sequences[0] else ()
+                _add((*default, "paper-full", *bev), _paper(source, sequence, condition))
+        for sequence in sequences:
             _add(("sanity",), _paper(source, sequence, CLEAN))
         for sequence in REVISIT_SEQUENCES[source]:
-            _add(("revisit",), _revisit(source, sequence))
+            _add(("revisit", *(("bev-revisit",) if source == "bev" else ())), _revisit(source, sequence))
+    for sequence in BEVPLACE_RANGES:
+        _add(("bev-bevplace",), _bevplace("bev", sequence))
 
 
 def suite(name: str, source: str | None = None) -> list[str]:
-    """Ids of a named suite ('paper', 'paper-full', 'revisit', 'sanity', 'all').
+    """Ids of a named suite ('paper', 'paper-full', 'revisit', 'sanity', 'all', 'bev-...').
 
-    `source` keeps only the tasks on "synth" (the embedded default) or "kitti"; None keeps both.
+    `source` keeps only the tasks on "synth" (the embedded default), "kitti" or "bev" (top-view
+    images); None keeps all. The 'bev-...' suites hold top-view image tasks whatever `source`.
     """
     import difflib
 
@@ -119,6 +176,7 @@ def suite(name: str, source: str | None = None) -> list[str]:
         close = difflib.get_close_matches(name, SUITES, n=1)
         hint = f" Did you mean: {close[0]}?" if close else ""
         raise RegistryError(f"unknown suite {name!r}; suites: {', '.join(SUITES)}.{hint}")
-    if source not in (None, "synth", "kitti"):
-        raise RegistryError(f"unknown source {source!r}; sources: synth, kitti")
+    if source not in (None, *SOURCE_LABEL):
+        raise RegistryError(f"unknown source {source!r}; sources: {', '.join(SOURCE_LABEL)}")
+    source = SOURCE_SUITES.get(name, source)
     return [i for i in _BUILTIN[name] if source is None or registry[i].source == source]

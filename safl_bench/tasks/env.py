@@ -1,7 +1,8 @@
 """The streaming environment: one query top-view map per step, answered with a database index.
 
 After `import safl_bench`, `gymnasium.make("SAFL/Synth00-T5R1.5-v0")` returns it (KITTI tasks
-take `kitti_root=...` as a make keyword, or $SAFL_KITTI_ROOT; `progress=False` silences the
+take `kitti_root=...` as a make keyword, or $SAFL_KITTI_ROOT, and top-view image tasks `bev_root=...`
+or $SAFL_BEV_ROOT; `progress=False` silences the
 progress bars of a first run, which generates the synthetic data and renders the maps).
 
 - observation: the current query map, Box(0, 1, (H, W), float32).
@@ -49,6 +50,7 @@ class TaskEnv(gymnasium.Env):
         *,
         task: Task | None = None,
         kitti_root: str | None = None,
+        bev_root: str | None = None,
         progress: bool = True,
     ) -> None:
         if task is None:
@@ -56,7 +58,7 @@ class TaskEnv(gymnasium.Env):
                 raise ConfigError("TaskEnv needs a task id or a Task")
             from safl_bench.tasks.registry import make
 
-            task = make(task_id, kitti_root=kitti_root, progress=progress)
+            task = make(task_id, kitti_root=kitti_root, bev_root=bev_root, progress=progress)
         self.task = task
         # private read-only copies: `info["database"]` is shared with the agent, not copied per reset
         self.database = np.array(task.database("topview"), dtype=np.float32)

@@ -18,7 +18,7 @@ from safl_bench.errors import ConfigError, RegistryError
 from safl_bench.tasks.spec import TaskSpec, make_id, parse_id
 
 if TYPE_CHECKING:
-    from safl_bench.datasource import DataSource
+    from safl_bench.sources import DataSource
     from safl_bench.tasks.task import Task
 
 #: All registered tasks by id (read it; change it through `register` / `unregister`).
@@ -106,6 +106,8 @@ def make(
     task_id: str,
     *,
     kitti_root: str | None = None,
+    bev_root: str | None = None,
+    bev_resolution_m: float | None = None,
     source: DataSource | None = None,
     progress: bool = True,
 ) -> Task:
@@ -114,8 +116,11 @@ def make(
     Views (top-view maps or points) are rendered or read from the map cache on first access
     (`task.database(kind)`, `task.queries(kind)`, or all at once with `task.prepare(...)`).
     `source` overrides the source the spec names (it must be of the same kind); otherwise KITTI
-    tasks take `kitti_root` or $SAFL_KITTI_ROOT and synthetic tasks the embedded default.
+    tasks take `kitti_root` or $SAFL_KITTI_ROOT, top-view image tasks `bev_root` or
+    $SAFL_BEV_ROOT (at `bev_resolution_m` metres per pixel, default 0.4) and synthetic tasks the
+    embedded default.
     """
     from safl_bench.tasks.task import Task
 
-    return Task.from_spec(spec(task_id), kitti_root=kitti_root, source=source, progress=progress)
+    return Task.from_spec(spec(task_id), kitti_root=kitti_root, bev_root=bev_root,
+                          bev_resolution_m=bev_resolution_m, source=source, progress=progress)

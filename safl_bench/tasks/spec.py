@@ -22,8 +22,8 @@ from safl_bench.noise import CLEAN, Condition
 #: fingerprint, so records made before the change are told apart from those made after it.
 DEFINITION_REVISION = 1
 
-SOURCES = ("synth", "kitti")
-PROTOCOLS = ("paper", "revisit")
+SOURCES = ("synth", "kitti", "bev")
+PROTOCOLS = ("paper", "revisit", "bevplace")
 
 #: Gymnasium's id grammar: `[namespace/]name[-v{version}]`.
 ID_RE = re.compile(r"^(?:(?P<namespace>[\w:-]+)/)?(?P<name>[\w:.-]+?)(?:-v(?P<version>\d+))?$")
@@ -48,15 +48,21 @@ def make_id(namespace: str | None, name: str, version: int | None) -> str:
 class TaskSpec:
     """One benchmark task.
 
-    source: "synth" (the embedded default, world `data_seed`) or "kitti" (a KITTI odometry root).
+    source: "synth" (the embedded default, world `data_seed`), "kitti" (a KITTI odometry root)
+        or "bev" (a folder of top-view images, `safl_bench.sources.bev`).
     sequence: the sequence name, e.g. "00".
     protocol: "paper" (database = clean maps, queries = the same frames re-rendered with
-        `condition`; true positive within `tp_radius_m`) or "revisit" (one sequence, queries =
+        `condition`; true positive within `tp_radius_m`), "revisit" (one sequence, queries =
         database = clean maps; a query may only match frames older than `window_s`; true positive
-        within `tp_radius_m`, false positive beyond `fp_radius_m`, the band between excluded).
+        within `tp_radius_m`, false positive beyond `fp_radius_m`, the band between excluded) or
+        "bevplace" (BEVPlace's: fixed database and query frame ranges of one sequence, clean
+        views, a true place within `tp_radius_m`, scored by Recall@1).
     step: every `step`-th frame (0, step, 2*step, ...) is used as database and query frame.
+    database_frames, query_frames: [start, stop) frame ranges of the database and the queries
+        (protocol "bevplace" only; every `step`-th frame of each range).
     seed: seed of the viewpoint noise (`safl_bench.noise.sample_offsets`).
-    map_config: every setting of the top-view maps.
+    map_config: every setting of the top-view maps rendered from scans (None for an image source,
+        whose views are its images).
     """
 
     id: str
@@ -67,7 +73,9 @@ class TaskSpec:
     step: int = 4
     seed: int = 0
     data_seed: int = 0
-    map_config: MapConfig = field(default_factory=MapConfig)
+    map_config: MapConfig | None = field(default_factory=MapConfig)
+    database_frames: tuple[int, int] | None = None
+    query_frames: tuple[int, int] | None = None
     tp_radius_m: float = 10.0
     fp_radius_m: float = 10.0
     window_s: float | None = None
@@ -101,10 +109,28 @@ class TaskSpec:
             raise ConfigError(
                 f"task {self.id}: need 0 <= tp_radius_m <= fp_radius_m, got {self.tp_radius_m}, {self.fp_radius_m}"
             )
-        if self.protocol == "paper":
+        ranges = (self.database_frames, self.query_frames)
+        if self.protocol == "bevplace":
+            for what, rng in zip(("database", "query"), ranges, strict=True):
+                if rng is None or len(rng) != 2 or not 0 <= rng[0] < rng[1]:
+                    raise ConfigError(f"task {self.id}: the bevplace protocol needs a {what} frame "
+                                      f"range [start, stop) with 0 <= start < stop, got {rng!r}")
+                object.__setattr__(self, "database_frames" if what == "database" else "query_frames",
+                                   (int(rng[0]), int(rng[1])))
+            if not self.condition.is_clean or self.window_s is not None:
+                raise ConfigError(f"task {self.id}: the bevplace protocol has clean queries and no time window")
+        elif ranges != (None, None):
+            raise ConfigError(f"task {self.id}: frame ranges belong to the bevplace protocol only")
+        if self.source == "bev" and self.map_config is not None:
+            if self.map_config != MapConfig():
+                raise ConfigError(f"task {self.id}: an image source's views are its images; it takes no map_config")
+            object.__setattr__(self, "map_config", None)
+        if self.source != "bev" and self.map_config is None:
+            raise ConfigError(f"task {self.id}: tasks on scans need a map_config")
+        if self.protocol in ("paper", "bevplace"):
             if self.window_s is not None or self.fp_radius_m != self.tp_radius_m:
                 raise ConfigError(
-                    f"task {self.id}: the paper protocol has no time window and no excluded band"
+                    f"task {self.id}: the {self.protocol} protocol has no time window and no excluded band"
                 )
         else:
             if not self.condition.is_clean:
@@ -118,7 +144,7 @@ class TaskSpec:
 
     def definition(self) -> dict[str, Any]:
         """Everything that changes the task's data or ground truth (no id, version or prose)."""
-        return {
+        out = {
             "revision": DEFINITION_REVISION,
             "source": self.source,
             "data_seed": self.data_seed if self.source == "synth" else None,
@@ -132,6 +158,10 @@ class TaskSpec:
             "fp_radius_m": self.fp_radius_m,
             "window_s": self.window_s,
         }
+        if self.protocol == "bevplace":  # only where set: older definitions keep their fingerprints
+            out["database_frames"] = list(self.database_frames or ())
+            out["query_frames"] = list(self.query_frames or ())
+        return out
 
     @property
     def fingerprint(self) -> str:

@@ -27,31 +27,18 @@ from safl_bench.noise import CLEAN, sample_offsets
 from safl_bench.tasks.spec import TaskSpec
 
 if TYPE_CHECKING:
-    from safl_bench.datasource import DataSource
     from safl_bench.parallel import Parallel
+    from safl_bench.sources import DataSource
 
 KINDS = ("topview", "points")
-
-
-def open_source(spec: TaskSpec, kitti_root: str | None = None, progress: bool = True) -> DataSource:
-    """The data source a spec names: the embedded default (generated on first use) or the KITTI
-    root (`kitti_root`, else $SAFL_KITTI_ROOT)."""
-    from safl_bench import datasource, paths
-
-    if spec.source == "synth":
-        return datasource.synth_source(seed=spec.data_seed, sequences=(spec.sequence,), progress=progress)
-    try:
-        root = paths.kitti_root(kitti_root)
-    except DataError as exc:
-        raise DataError(f"task {spec.id}: {exc}") from None
-    return datasource.kitti_source(root)
 
 
 class Task:
     """One task ready to run: database and query frames with ground truth; views on demand.
 
     Attributes: `spec`, `source` (None for a task built from arrays), `database_frames` and
-    `query_frames` (indices into the sequence), `database_positions` / `query_positions`
+    `query_frames` (indices into the sequence: every `step`-th frame for both, or the spec's
+    frame ranges), `database_positions` / `query_positions`
     (n, 2) m, `database_times` / `query_times` (n,) s, `query_offsets` (Nq, 3) the viewpoint
     noise [dx, dy, dtheta] each query was rendered with, `truth` (`GroundTruth`).
     """
@@ -75,12 +62,11 @@ class Task:
         self.source = source
         self.progress = progress
         self.sequence_length = len(positions)
-        frames = select_frames(self.sequence_length, spec.step)
-        self.database_frames = frames
-        self.query_frames = frames.copy()
-        self.database_positions = positions[frames]
+        self.database_frames = self._frames(spec.database_frames)
+        self.query_frames = self._frames(spec.query_frames)
+        self.database_positions = positions[self.database_frames]
         self.query_positions = positions[self.query_frames]
-        self.database_times = times[frames]
+        self.database_times = times[self.database_frames]
         self.query_times = times[self.query_frames]
         self.query_offsets = sample_offsets(len(self.query_frames), spec.condition, spec.seed)
         self.truth = GroundTruth(
@@ -94,18 +80,39 @@ class Task:
         )
         self._views: dict[tuple[str, str], Any] = {}
 
+    def _frames(self, frame_range: tuple[int, int] | None) -> np.ndarray:
+        """Every `step`-th frame of the sequence, or of `frame_range` [start, stop)."""
+        if frame_range is None:
+            return select_frames(self.sequence_length, self.spec.step)
+        start, stop = frame_range
+        if stop > self.sequence_length:
+            raise DataError(f"task {self.spec.id}: frames {start}..{stop - 1} asked for, but sequence "
+                            f"{self.spec.sequence} has {self.sequence_length} frames")
+        return np.arange(start, stop, self.spec.step, dtype=np.int64)
+
+    @property
+    def shared_views(self) -> bool:
+        """Whether the queries are the database views themselves (same frames, clean)."""
+        return self.spec.protocol == "revisit" or (
+            self.spec.condition.is_clean and self.spec.query_frames is None)
+
     @classmethod
     def from_spec(
         cls,
         spec: TaskSpec,
         *,
         kitti_root: str | None = None,
+        bev_root: str | None = None,
+        bev_resolution_m: float | None = None,
         source: DataSource | None = None,
         progress: bool = True,
     ) -> Task:
         """Open the spec's data source and sequence (or `source`, of the same kind)."""
         if source is None:
-            source = open_source(spec, kitti_root, progress)
+            from safl_bench.sources import DEFAULT_RESOLUTION_M, open_source
+
+            source = open_source(spec, kitti_root=kitti_root, bev_root=bev_root, progress=progress,
+                                 bev_resolution_m=bev_resolution_m or DEFAULT_RESOLUTION_M)
         elif source.kind != spec.source:
             raise ConfigError(
                 f"task {spec.id} runs on {spec.source} data, got a {source.kind} source"
@@ -130,11 +137,10 @@ class Task:
     ) -> Task:
         """A task on in-memory data: views of the selected frames given for one `kind`."""
         task = cls(spec, positions=positions, times=times, progress=False)
-        for role, views in (("database", database), ("queries", queries)):
-            if len(views) != len(task.database_frames):
-                raise DataError(
-                    f"task {spec.id}: {len(views)} {role} views for {len(task.database_frames)} frames"
-                )
+        for role, views, frames in (("database", database, task.database_frames),
+                                    ("queries", queries, task.query_frames)):
+            if len(views) != len(frames):
+                raise DataError(f"task {spec.id}: {len(views)} {role} views for {len(frames)} frames")
             task._views[role, kind] = views
         return task
 
@@ -168,6 +174,8 @@ class Task:
             self._check_kind(kind)
         if self.source is None:
             return
+        for kind in kinds:
+            self.source.check_kind(kind)
         mapcache.prepare(
             self.source,
             self.spec.sequence,
@@ -180,6 +188,7 @@ class Task:
         )
 
     def _conditions(self) -> list:
+        """The conditions rendered at the database frames (queries on other frames: their own)."""
         if self.spec.protocol == "revisit" or self.spec.condition.is_clean:
             return [CLEAN]
         return [CLEAN, self.spec.condition]
@@ -191,9 +200,8 @@ class Task:
 
     def _load(self, role: str, kind: str) -> Any:
         self._check_kind(kind)
-        if role == "queries" and (self.spec.protocol == "revisit" or self.spec.condition.is_clean):
-            if (role, kind) not in self._views:  # same frames, same (clean) rendering
-                return self._load("database", kind)
+        if role == "queries" and self.shared_views and (role, kind) not in self._views:
+            return self._load("database", kind)  # same frames, same (clean) rendering
         if (role, kind) not in self._views:
             if self.source is None:
                 raise DataError(f"task {self.spec.id} was built from arrays without {kind} views")
@@ -222,6 +230,9 @@ class Task:
         if self.source is not None:
             out["data_label"] = self.source.label
             out["data_fingerprint"] = self.source.fingerprint(self.spec.sequence)
+            notes = self.source.notes(self.spec.sequence)
+            if notes:
+                out["data_notes"] = notes
         return out
 
 
@@ -236,17 +247,22 @@ def prepare_tasks(tasks: Sequence[Task], kinds: Sequence[str] = ("topview",), *,
     from safl_bench.errors import SaflError
 
     groups: dict[tuple[Any, ...], tuple[DataSource, Task, list[Any], list[int]]] = {}
+    failed: dict[int, str] = {}
     for i, task in enumerate(tasks):
         if task.source is None:
             continue
         for kind in kinds:
             task._check_kind(kind)
+            try:
+                task.source.check_kind(kind)
+            except SaflError as exc:
+                failed[i] = str(exc)
+                continue
             key = (task.source.kind, str(task.source.root), task.spec.sequence, task.spec.map_config,
                    task.database_frames.tobytes(), task.spec.seed, kind)
             _, _, conditions, members = groups.setdefault(key, (task.source, task, [], []))
             conditions.extend(c for c in task._conditions() if c not in conditions)
             members.append(i)
-    failed: dict[int, str] = {}
     for (*_, kind), (source, task, conditions, members) in groups.items():
         try:
             mapcache.prepare(source, task.spec.sequence, task.spec.map_config,

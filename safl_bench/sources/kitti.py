@@ -1,4 +1,6 @@
-"""Reader of the KITTI odometry layout (real KITTI or the synthetic default), built on pykitti.
+"""KITTI odometry scans as a data source: the layout's reader (built on pykitti) and `KittiSource`.
+
+The same layout serves real KITTI and the synthetic default (`safl_bench.sources.synth`).
 
 Layout, relative to the root:
 
@@ -17,17 +19,21 @@ from __future__ import annotations
 
 import contextlib
 import io
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
 from safl_bench.errors import DataError
+from safl_bench.fingerprint import fingerprint
+from safl_bench.sources.base import DataSource, file_stat
 
 POINT_BYTES = 16  # float32 x, y, z, reflectance
 
 
-def _read_lines(path: Path) -> list[str]:
+def read_lines(path: Path) -> list[str]:
     try:
         text = path.read_text()
     except UnicodeDecodeError as exc:
@@ -35,7 +41,7 @@ def _read_lines(path: Path) -> list[str]:
     return [line for line in text.splitlines() if line.strip()]
 
 
-def _parse_numbers(path: Path, lineno: int, text: str, count: int | None) -> np.ndarray:
+def parse_numbers(path: Path, lineno: int, text: str, count: int | None) -> np.ndarray:
     try:
         values = np.array([float(tok) for tok in text.split()], dtype=np.float64)
     except ValueError as exc:
@@ -51,13 +57,13 @@ def read_tr(calib_path: Path) -> np.ndarray:
     """The 4x4 LiDAR -> camera-0 transform `Tr` from a KITTI `calib.txt`."""
     if not calib_path.is_file():
         raise DataError(f"{calib_path}: calibration file is missing (it must hold Tr)")
-    for lineno, line in enumerate(_read_lines(calib_path), start=1):
+    for lineno, line in enumerate(read_lines(calib_path), start=1):
         key, sep, value = line.partition(":")
         if not sep:
             raise DataError(f"{calib_path} line {lineno}: expected 'KEY: numbers'")
         if key.strip() == "Tr":
             tr = np.eye(4)
-            tr[:3, :] = _parse_numbers(calib_path, lineno, value, 12).reshape(3, 4)
+            tr[:3, :] = parse_numbers(calib_path, lineno, value, 12).reshape(3, 4)
             if abs(np.linalg.det(tr[:3, :3])) < 1e-6:
                 raise DataError(f"{calib_path}: Tr is not a rigid transform (singular rotation)")
             return tr
@@ -68,22 +74,22 @@ def read_times(path: Path, n: int) -> np.ndarray:
     """Timestamps (s) from `times.txt`, one per scan."""
     if not path.is_file():
         raise DataError(f"{path}: timestamps file is missing")
-    lines = _read_lines(path)
+    lines = read_lines(path)
     if len(lines) != n:
         raise DataError(f"{path}: {len(lines)} timestamps for {n} scans")
     return np.array(
-        [_parse_numbers(path, i, line, 1)[0] for i, line in enumerate(lines, start=1)]
+        [parse_numbers(path, i, line, 1)[0] for i, line in enumerate(lines, start=1)]
     )
 
 
 def read_camera_poses(path: Path, n: int) -> np.ndarray:
     """Camera-0 poses (n, 4, 4) from `poses/XX.txt`, validated line by line."""
-    lines = _read_lines(path)
+    lines = read_lines(path)
     if len(lines) != n:
         raise DataError(f"{path}: {len(lines)} poses for {n} scans (one pose per scan needed)")
     poses = np.tile(np.eye(4), (n, 1, 1))
     for i, line in enumerate(lines):
-        poses[i, :3, :] = _parse_numbers(path, i + 1, line, 12).reshape(3, 4)
+        poses[i, :3, :] = parse_numbers(path, i + 1, line, 12).reshape(3, 4)
     return poses
 
 
@@ -210,3 +216,48 @@ def open_sequence(root: Path | str, name: str, *, require_poses: bool = True) ->
         cam = np.asarray(data.poses, dtype=np.float64).reshape(n, 4, 4)
         poses = camera_to_lidar_poses(cam, np.asarray(data.calib.T_cam0_velo, dtype=np.float64))
     return KittiSequence(root=root, name=name, velo_files=velo_files, times=times, tr=tr, _poses=poses)
+
+
+@dataclass(frozen=True)
+class KittiSource(DataSource):
+    """A KITTI odometry root (or any directory in its layout): scans, poses, calibration, times.
+
+    Its fingerprint covers the root path, the sizes and modification times of poses/calib/times
+    and the number of scans; views are rendered from sliding local maps of the scans
+    (`safl_bench.mapbuild`)."""
+
+    kind: ClassVar[str] = "kitti"
+
+    def _open_sequence(self, name: str) -> KittiSequence:
+        return open_sequence(self.root, name)
+
+    def file_stats(self, name: str) -> dict[str, object]:
+        """Sizes and mtimes of the sequence's text files and its scan count (no reading)."""
+        seq_dir = self.root / "sequences" / name
+        velo = seq_dir / "velodyne"
+        return {
+            "poses": file_stat(self.root / "poses" / f"{name}.txt"),
+            "calib": file_stat(seq_dir / "calib.txt"),
+            "times": file_stat(seq_dir / "times.txt"),
+            "scans": sum(1 for _ in velo.glob("*.bin")) if velo.is_dir() else 0,
+        }
+
+    def fingerprint(self, name: str) -> str:
+        name = str(name)
+        return fingerprint("kitti", str(self.root.resolve()), name, self.file_stats(name))
+
+    def build_views(
+        self, name: str, config: Any, frames: np.ndarray, offsets: Mapping[str, np.ndarray | None],
+        kinds: Sequence[str] = ("topview",), progress: bool = True,
+    ) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
+        from safl_bench.mapbuild import build_views
+
+        return build_views(self.sequence(name), config, frames, offsets, kinds, progress=progress)
+
+
+def kitti_source(root: str | Path) -> KittiSource:
+    """A KITTI odometry root (or any directory in its layout)."""
+    path = Path(root).expanduser()
+    if not path.is_dir():
+        raise DataError(f"KITTI root {path} does not exist or is not a directory")
+    return KittiSource(root=path, label="KITTI")

@@ -1,0 +1,82 @@
+"""Data sources, one file each: where the frames of a sequence and their views come from.
+
+* `kitti`: a KITTI odometry root (scans, poses, calibration, times), read with pykitti;
+* `synth`: the embedded synthetic default, generated on first use in the same layout;
+* `bev`: folders of per-frame top-view images with poses (BEVPlace's published KITTI layout).
+
+All three implement `DataSource` (`base`); a new dataset or layout is one new file here and one
+entry in `open_source`. Task specs name a source by its `kind`: "kitti", "synth" or "bev".
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.sources.base import DataSource
+from safl_bench.sources.bev import BEV_ROOT_ENV, DEFAULT_RESOLUTION_M, BevSource, bev_source
+from safl_bench.sources.kitti import KittiSource, kitti_source
+from safl_bench.sources.synth import SynthSource, synth_source
+
+if TYPE_CHECKING:
+    from safl_bench.tasks.spec import TaskSpec
+
+KINDS = ("synth", "kitti", "bev")
+#: The option that points each real source at its data (for error messages).
+ROOT_OPTION = {"kitti": "--kitti-root DIR", "bev": "--bev-root DIR"}
+
+__all__ = [
+    "BEV_ROOT_ENV", "DEFAULT_RESOLUTION_M", "KINDS", "BevSource", "DataSource", "KittiSource",
+    "SynthSource", "bev_source", "kitti_source", "open_source", "real_roots", "resolve_source",
+    "synth_source",
+]
+
+
+def real_roots(kitti_root: str | os.PathLike[str] | None,
+               bev_root: str | os.PathLike[str] | None) -> tuple[str | None, str | None]:
+    """The KITTI and top-view roots a command was given (options first, then $SAFL_KITTI_ROOT and
+    $SAFL_BEV_ROOT); both at once is an error: a run reads one real source."""
+    if kitti_root is not None and bev_root is not None:
+        raise ConfigError("--kitti-root and --bev-root name two data sources; give one of them")
+    return (None if kitti_root is None else str(kitti_root), None if bev_root is None else str(bev_root))
+
+
+def resolve_source(
+    kitti_root: str | Path | None,
+    *,
+    bev_root: str | Path | None = None,
+    bev_resolution_m: float = DEFAULT_RESOLUTION_M,
+    sequences: Sequence[str] | None = None,
+    seed: int = 0,
+    progress: bool = True,
+) -> DataSource:
+    """KITTI at `kitti_root`, the top-view images at `bev_root`, else the synthetic default
+    (generated if missing)."""
+    real_roots(kitti_root, bev_root)
+    if kitti_root is not None:
+        return kitti_source(kitti_root)
+    if bev_root is not None:
+        return bev_source(bev_root, bev_resolution_m)
+    return synth_source(seed, sequences, progress=progress)
+
+
+def open_source(spec: TaskSpec, *, kitti_root: str | None = None, bev_root: str | None = None,
+                bev_resolution_m: float = DEFAULT_RESOLUTION_M, progress: bool = True) -> DataSource:
+    """The data source a task spec names: the embedded default (generated on first use), the
+    KITTI root (`kitti_root`, else $SAFL_KITTI_ROOT) or the top-view images (`bev_root`, else
+    $SAFL_BEV_ROOT)."""
+    from safl_bench import paths
+
+    if spec.source == "synth":
+        return synth_source(seed=spec.data_seed, sequences=(spec.sequence,), progress=progress)
+    explicit = kitti_root if spec.source == "kitti" else bev_root
+    env = paths.KITTI_ROOT_ENV if spec.source == "kitti" else BEV_ROOT_ENV
+    value = explicit if explicit is not None else os.environ.get(env)
+    if not value:
+        raise DataError(f"task {spec.id} needs its data: pass {ROOT_OPTION[spec.source]} or set {env}")
+    if spec.source == "kitti":
+        return kitti_source(paths.kitti_root(value))
+    return bev_source(value, bev_resolution_m)

@@ -1,0 +1,236 @@
+"""Top-view image folders as a data source: real KITTI without its 80 GB of scans.
+
+Layout, relative to the root (BEVPlace's published `data/KITTI/`, Luo et al., ICCV 2023):
+
+    <seq>/imgs/NNNNNN.png   one 8-bit grey image per frame, square, any size (BEVPlace's are
+                            151 x 151: a count of 0.4 m voxels per pixel, scaled to 0-255)
+    <seq>/pose.txt          12 numbers a line (3x4 row-major): the LiDAR pose of each frame
+    <seq>/times.txt         optional: one timestamp (s) per frame
+
+Choices, and why:
+- Positions are x and y of the LiDAR pose (columns 3 and 7 of `pose.txt`), the ground plane;
+  BEVPlace's published Recall@1 is reproduced with x and y, not x and z.
+- The image centre is the sensor, forward (LiDAR x) up and left (LiDAR y) left, as in this
+  project's own top views; pixel (r, c) of an S x S image lies (c0 - r) * res ahead and
+  (c0 - c) * res to the left of the sensor, c0 = (S - 1) / 2 (75 for BEVPlace's images).
+- The resolution cannot be read from the files; it is a setting (`resolution_m`, default
+  0.4 m per pixel, BEVPlace's), part of the source's fingerprint and so of every cache key.
+- Without `times.txt` frames are taken as 10 Hz (KITTI's LiDAR rate); `notes` says so, and the
+  runner writes it into every record of the sequence.
+- The views are the images themselves, as float32 = value / 255. There are no points: methods
+  that read local-map points get a one-line error. Viewpoint noise (the paper protocol) cannot
+  re-render anything, so noisy queries are the images resampled to the moved viewpoint
+  (`safl_bench.resample.move_viewpoint`: nearest neighbour, what comes from outside the image
+  is empty).
+- The decoded images of a whole sequence are cached once, uncompressed uint8, under the map
+  cache (`<home>/maps/bev-<seq>/images-<key>.npy`), keyed by the size and modification time of
+  every image and text file and the resolution: a cached read is one memory-mapped file.
+  Rendered views are not cached (`cache_views = False`): slicing and resampling that array is
+  cheaper than reading a cache file of them.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from safl_bench.atomic import atomic_path
+from safl_bench.errors import DataError
+from safl_bench.fingerprint import fingerprint
+from safl_bench.sources.base import DataSource, file_stat
+from safl_bench.sources.kitti import parse_numbers, read_lines, read_times
+
+DEFAULT_RESOLUTION_M = 0.4
+#: Frame period assumed without `times.txt` (KITTI's LiDAR runs at 10 Hz).
+ASSUMED_PERIOD_S = 0.1
+BEV_ROOT_ENV = "SAFL_BEV_ROOT"
+IMAGE_CACHE_VERSION = 1
+
+
+@dataclass(eq=False)
+class BevSequence:
+    """One sequence of a top-view image folder: image files, LiDAR poses, times."""
+
+    name: str
+    folder: Path
+    image_files: list[Path]
+    poses: np.ndarray  # (n, 4, 4) LiDAR poses
+    times: np.ndarray
+    times_assumed: bool
+    _images: np.ndarray | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.image_files)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(n, 2) x, y of each frame in the ground plane (m)."""
+        return self.poses[:, :2, 3]
+
+    @property
+    def headings(self) -> np.ndarray:
+        """(n,) heading (yaw about z, rad) of each frame."""
+        return np.arctan2(self.poses[:, 1, 0], self.poses[:, 0, 0])
+
+
+def _read_poses(path: Path, n: int, images: Path) -> np.ndarray:
+    lines = read_lines(path)
+    if len(lines) != n:
+        raise DataError(f"{path}: {len(lines)} pose lines for {n} images in {images}")
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    for i, line in enumerate(lines):
+        poses[i, :3, :] = parse_numbers(path, i + 1, line, 12).reshape(3, 4)
+    return poses
+
+
+def open_bev_sequence(root: Path, name: str) -> BevSequence:
+    """Open sequence `name` of a top-view image folder, checking every file cheaply (names,
+    counts, poses, times; the images themselves are checked when decoded)."""
+    folder = root / name
+    if not folder.is_dir():
+        have = sorted(p.name for p in root.iterdir() if (p / "imgs").is_dir()) if root.is_dir() else []
+        raise DataError(f"{folder}: no such sequence (sequences under {root}: {', '.join(have) or 'none'})")
+    imgs = folder / "imgs"
+    if not imgs.is_dir():
+        raise DataError(f"{imgs}: missing (one image per frame, imgs/NNNNNN.png)")
+    files = sorted(imgs.glob("*.png"))
+    if not files:
+        raise DataError(f"{imgs}: no .png images found")
+    pose_path = folder / "pose.txt"
+    if not pose_path.is_file():
+        raise DataError(f"{pose_path}: missing (the LiDAR pose of each frame, 12 numbers a line)")
+    poses = _read_poses(pose_path, len(files), imgs)
+    times_path = folder / "times.txt"
+    if times_path.is_file():
+        times, assumed = read_times(times_path, len(files)), False
+    else:
+        times, assumed = np.arange(len(files), dtype=np.float64) / (1.0 / ASSUMED_PERIOD_S), True
+    return BevSequence(name, folder, files, poses, times, assumed)
+
+
+def decode_image(path: Path) -> np.ndarray:
+    """One 8-bit grey PNG as a (S, S) uint8 array; DataError naming the file otherwise."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            if image.format != "PNG":
+                raise DataError(f"{path}: not a PNG image ({image.format})")
+            if image.mode != "L":
+                raise DataError(f"{path}: expected an 8-bit grey image (mode L), got mode {image.mode}")
+            array = np.asarray(image)
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        raise DataError(f"{path}: not a readable PNG image ({exc})") from None
+    if array.shape[0] != array.shape[1]:
+        raise DataError(f"{path}: image is {array.shape[1]}x{array.shape[0]}, not square")
+    return array
+
+
+def decode_images(files: Sequence[Path], progress: bool = True) -> np.ndarray:
+    """Every image of a sequence as one (n, S, S) uint8 array; all must have the same size."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from tqdm import tqdm
+
+    first = decode_image(files[0])
+    out = np.empty((len(files), *first.shape), dtype=np.uint8)
+
+    def put(i: int) -> None:  # PIL decodes without the GIL: threads use every core
+        image = first if i == 0 else decode_image(files[i])
+        if image.shape != first.shape:
+            raise DataError(
+                f"{files[i]}: image is {image.shape[1]}x{image.shape[0]}, but {files[0].name} is "
+                f"{first.shape[1]}x{first.shape[0]}: all images of a sequence must have one size"
+            )
+        out[i] = image
+
+    with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1)) as pool:
+        for _ in tqdm(pool.map(put, range(len(files))), total=len(files), unit="image",
+                      desc=f"images {files[0].parent.parent.name}", disable=not progress, leave=False):
+            pass
+    return out
+
+
+@dataclass(frozen=True)
+class BevSource(DataSource):
+    """A folder of per-frame top-view images with poses, in BEVPlace's layout (module doc)."""
+
+    resolution_m: float = DEFAULT_RESOLUTION_M
+    kind: ClassVar[str] = "bev"
+    view_kinds: ClassVar[tuple[str, ...]] = ("topview",)
+    cache_views: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.resolution_m) or self.resolution_m <= 0:
+            raise DataError(f"top-view resolution must be a number of metres per pixel > 0, got {self.resolution_m!r}")
+
+    def _open_sequence(self, name: str) -> BevSequence:
+        return open_bev_sequence(self.root, name)
+
+    def fingerprint(self, name: str) -> str:
+        seq = self.sequence(name)
+        stats = [file_stat(p) for p in seq.image_files]
+        return fingerprint("bev", str(self.root.resolve()), str(name), self.resolution_m,
+                           [p.name for p in seq.image_files], stats,
+                           file_stat(seq.folder / "pose.txt"), file_stat(seq.folder / "times.txt"))
+
+    def notes(self, name: str) -> list[str]:
+        seq = self.sequence(name)
+        out = [f"top views: the images of {seq.folder / 'imgs'}, {self.resolution_m:g} m per pixel"]
+        if seq.times_assumed:
+            out.append(f"no {seq.folder / 'times.txt'}: frames taken as 10 Hz")
+        return out
+
+    def image_cache_path(self, name: str) -> Path:
+        from safl_bench.paths import map_cache_dir
+
+        key = fingerprint(IMAGE_CACHE_VERSION, self.fingerprint(name))
+        return map_cache_dir() / f"bev-{name}" / f"images-{key}.npy"
+
+    def images(self, name: str, progress: bool = True) -> np.ndarray:
+        """All images of sequence `name`, (n, S, S) uint8: decoded once, then from the cache."""
+        seq = self.sequence(name)
+        if seq._images is None:
+            path = self.image_cache_path(name)
+            try:
+                images = np.load(path, mmap_mode="r")
+                if images.shape[0] != len(seq) or images.dtype != np.uint8:
+                    raise ValueError("stale")
+            except (OSError, ValueError):
+                images = decode_images(seq.image_files, progress=progress)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                with atomic_path(path) as tmp:
+                    with open(tmp, "wb") as fh:
+                        np.save(fh, images)
+            seq._images = images
+        return seq._images
+
+    def build_views(
+        self, name: str, config: Any, frames: np.ndarray, offsets: Mapping[str, np.ndarray | None],
+        kinds: Sequence[str] = ("topview",), progress: bool = True,
+    ) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
+        from safl_bench.mapbuild import check_frames
+        from safl_bench.resample import move_viewpoint
+
+        for kind in kinds:
+            self.check_kind(kind)
+        frames = check_frames(frames, len(self.sequence(name)), name)
+        images = self.images(name, progress=progress)[frames]
+        out: dict[tuple[str, str], np.ndarray | list[np.ndarray]] = {}
+        for label, offset in offsets.items():
+            moved = images if offset is None else move_viewpoint(images, offset, self.resolution_m)
+            out[label, "topview"] = moved.astype(np.float32) / np.float32(255.0)
+        return out
+
+
+def bev_source(root: str | Path, resolution_m: float = DEFAULT_RESOLUTION_M) -> BevSource:
+    """A top-view image folder (BEVPlace's layout)."""
+    path = Path(root).expanduser()
+    if not path.is_dir():
+        raise DataError(f"top-view image root {path} does not exist or is not a directory")
+    return BevSource(root=path, label="top-view images", resolution_m=float(resolution_m))
