@@ -183,23 +183,28 @@ def method_class(name: str) -> type[Method]:
     raise RegistryError(f"unknown method {name!r}{hint} (known: {', '.join(known) or 'none'})")
 
 
-def shipped_weights_path(cls: type[Method]) -> Path | None:
-    """The weights file shipped beside the method's module (`weights/<name>.safetensors`),
-    or None when the method ships none (yet)."""
+def shipped_weights_path(cls: type[Method], source: str | None = None) -> Path | None:
+    """The weights file shipped beside the method's module: `weights/<name>-<source>.safetensors`
+    (trained on that kind of data, e.g. "bev": real KITTI top views) when `source` is given and
+    there is one, else `weights/<name>.safetensors` (the synthetic default's); None when the
+    method ships none (yet)."""
     module = sys.modules.get(cls.__module__)
     file = getattr(module, "__file__", None)
     if not cls.trainable or file is None:
         return None
-    path = Path(file).parent / "weights" / f"{cls.name}.safetensors"
-    return path if path.is_file() else None
+    folder = Path(file).parent / "weights"
+    names = ([f"{cls.name}-{source}.safetensors"] if source else []) + [f"{cls.name}.safetensors"]
+    return next((folder / n for n in names if (folder / n).is_file()), None)
 
 
-def make_method(name: str, *, weights: str | Path | None = None, **params: Any) -> Method:
+def make_method(name: str, *, weights: str | Path | None = None, source: str | None = None,
+                **params: Any) -> Method:
     """A configured instance of the method registered as `name`.
 
     For trainable methods, `weights` picks the learned state:
-      * None (default): the shipped weights when the package has them, otherwise the untrained
-        (random, seeded) networks with a warning; `config()["weights"]` records which;
+      * None (default): the shipped weights when the package has them (those trained on
+        `source`'s kind of data where they exist, see `shipped_weights_path`), otherwise the
+        untrained (random, seeded) networks with a warning; `config()["weights"]` records which;
       * "shipped": the shipped weights, ConfigError when there are none;
       * "untrained": the randomly initialised networks (the honesty baseline);
       * a path: a file written by `Method.save` / `safl-bench train`.
@@ -210,7 +215,7 @@ def make_method(name: str, *, weights: str | Path | None = None, **params: Any) 
             raise ConfigError(f"method {name!r} learns nothing and takes no weights (got {weights!r})")
         return _construct(cls, params)
     if weights is None or weights == "shipped":
-        shipped = shipped_weights_path(cls)
+        shipped = shipped_weights_path(cls, source)
         if shipped is not None:
             method = cls.load(shipped, **params)
             # records name the shipped file by package, not by this machine's install path
@@ -218,6 +223,7 @@ def make_method(name: str, *, weights: str | Path | None = None, **params: Any) 
                 **(method.weights_info or {}),
                 "source": "shipped",
                 "path": f"{cls.__module__.rsplit('.', 1)[0]}/weights/{shipped.name}",
+                "picked_for": source or "synth",
             }
             return method
         if weights == "shipped":

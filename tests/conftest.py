@@ -99,3 +99,46 @@ def safl_home(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     home = tmp_path / "home"
     monkeypatch.setenv("SAFL_HOME", str(home))
     return home
+
+
+def write_bev(root: Path, name: str = "00", n: int = 40, size: int = 41, times: bool = True,
+              seed: int = 0) -> Path:
+    """Write sequence `name` in BEVPlace's top-view image layout under `root` (`SEQ/imgs/*.png`,
+    `SEQ/pose.txt`, optionally `SEQ/times.txt`): a route that drives 30 m out along x and back,
+    so the second half revisits the first; each image shows a fixed pattern of "buildings" around
+    the frame's position (0.4 m pixels, forward up, left left), as counts in steps of 25.5.
+    Returns root."""
+    from PIL import Image
+
+    rng = np.random.default_rng(seed)
+    landmarks = rng.uniform([-20, -15], [50, 15], (60, 2))
+    half = n // 2
+    xs = np.concatenate([np.linspace(0, 30, half), np.linspace(30, 0, n - half)])
+    heading = np.where(np.arange(n) < half, 0.0, np.pi)
+    seq = root / name
+    (seq / "imgs").mkdir(parents=True, exist_ok=True)
+    res, c0 = 0.4, (size - 1) / 2
+    lines = []
+    for i in range(n):
+        c, s = np.cos(heading[i]), np.sin(heading[i])
+        rel = (landmarks - [xs[i], 0.0]) @ np.array([[c, -s], [s, c]])  # world -> robot frame
+        image = np.zeros((size, size), np.uint8)
+        r = np.rint(c0 - rel[:, 0] / res).astype(int)
+        col = np.rint(c0 - rel[:, 1] / res).astype(int)
+        ok = (r >= 0) & (r < size) & (col >= 0) & (col < size)
+        image[r[ok], col[ok]] = (np.arange(60)[ok] % 10 + 1) * 25.5
+        Image.fromarray(image, mode="L").save(seq / "imgs" / f"{i:06d}.png")
+        pose = np.eye(4)
+        pose[:2, :2] = [[c, -s], [s, c]]
+        pose[:3, 3] = [xs[i], 0.0, 0.0]
+        lines.append(" ".join(f"{v:.9e}" for v in pose[:3].ravel()))
+    (seq / "pose.txt").write_text("\n".join(lines) + "\n")
+    if times:
+        (seq / "times.txt").write_text("".join(f"{i:.6e}\n" for i in range(n)))  # 1 Hz
+    return root
+
+
+@pytest.fixture
+def bev_root(tmp_path: Path) -> Path:
+    """A private top-view image folder with sequence "00" (40 frames of 41 x 41)."""
+    return write_bev(tmp_path / "bev")

@@ -196,7 +196,7 @@ def _tiny_stable(**kw):
 
 
 def test_make_method_weights_choices(monkeypatch, tmp_path):
-    monkeypatch.setattr(reg, "shipped_weights_path", lambda cls: None)
+    monkeypatch.setattr(reg, "shipped_weights_path", lambda cls, source=None: None)
     with pytest.warns(UserWarning, match="UNTRAINED"):
         m = reg.make_method("stable_afl", width=4, encoder_width=4, code_size=16, hidden=16)
     assert m.config()["weights"]["source"] == "untrained"
@@ -206,7 +206,7 @@ def test_make_method_weights_choices(monkeypatch, tmp_path):
     assert m.weights_info == {"source": "untrained", "seed": 3}
 
     path = _tiny_stable(seed=5).save(tmp_path / "stable_afl.safetensors", parts=("encoder",))
-    monkeypatch.setattr(reg, "shipped_weights_path", lambda cls: path)
+    monkeypatch.setattr(reg, "shipped_weights_path", lambda cls, source=None: path)
     shipped = reg.make_method("stable_afl")
     assert shipped.weights_info["source"] == "shipped" and len(shipped.weights_info["sha256"]) == 64
     assert shipped.weights_info["path"] == f"methods/weights/{path.name}"

@@ -1,7 +1,9 @@
 """`safl-bench train`: train a learned descriptor (BiGAN or Stable-AFL) on the training sequences.
 
-Data: the clean top-view maps of the training sequences (KITTI 01-08 with --kitti-root, else
-the synthetic default's training sequences), every `--step`-th frame, from the map cache.
+Data: the clean top-view maps of the training sequences (KITTI 01-08 with --kitti-root; KITTI 02
+with --bev-root, the top-view images, whose other sequences 00, 05 and 06 are for testing and
+evaluation only; else the synthetic default's training sequences), every `--step`-th frame, from
+the map cache, resampled to the method's input size.
 
 Writes into --out (default <home>/weights/<method>-<source>-seed<seed>):
   last.safetensors     checkpoint after the last completed epoch (all networks + optimizers)
@@ -24,12 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from safl_bench.cli.options import parse_key_values, seed
+from safl_bench.cli.options import add_bev_arguments, parse_key_values, seed, source_kind
 from safl_bench.errors import ConfigError
 
 HELP = "train a learned descriptor (bigan, stable_afl) on the training sequences"
 
 KITTI_TRAIN_SEQUENCES = ("01", "02", "03", "04", "05", "06", "07", "08")
+#: Top-view images (BEVPlace publishes 00, 02, 05, 06): 00 is the test sequence, 05 and 06 are for
+#: evaluation only, so training takes 02.
+BEV_TRAIN_SEQUENCES = ("02",)
+BEV_HELD_OUT = ("00", "05", "06")
 
 #: Validation tasks logged per epoch by default (the second test sequence, not the headline one).
 DEFAULT_VAL_CONDITIONS = ("T1R1", "T10R1.5")
@@ -39,6 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--method, data, training and output options."""
     parser.add_argument("--method", required=True, help="a trainable method, e.g. stable_afl or bigan")
     parser.add_argument("--kitti-root", help="train on KITTI odometry 01-08 at this root (default: the synthetic data)")
+    add_bev_arguments(parser)
     parser.add_argument("--synth-seed", type=int, default=None, help="seed of the synthetic data (default 0)")
     parser.add_argument("--sequences", help="comma-separated training sequences (default: KITTI 01-08 or the synthetic training ones)")
     parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1: all)")
@@ -57,34 +64,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def default_val_tasks(kitti: bool) -> list[str]:
-    """Sequence 09 (KITTI or synthetic) at the default validation conditions."""
+def default_val_tasks(source: str) -> list[str]:
+    """Sequence 09 (KITTI or synthetic; 00 for the top-view images, which have no 09) at the
+    default validation conditions."""
     from safl_bench.noise import Condition
     from safl_bench.tasks.builtin import paper_id
 
-    source = "kitti" if kitti else "synth"
-    return [paper_id(source, "09", Condition.parse(c)) for c in DEFAULT_VAL_CONDITIONS]
+    sequence = "00" if source == "bev" else "09"
+    return [paper_id(source, sequence, Condition.parse(c)) for c in DEFAULT_VAL_CONDITIONS]
 
 
-def validation_callback(task_ids: list[str], source_label: str, kitti_root: str | None, progress: bool) -> Any:
+def validation_callback(task_ids: list[str], source_label: str, kitti_root: str | None, progress: bool,
+                        bev_root: str | None = None, bev_resolution_m: float | None = None) -> Any:
     """A `fit` callback logging, per epoch, the AUC of the sequence matcher on each task.
 
     The task views are rendered (or read from the map cache) once, before training starts.
     The log keys are what the leaderboard's training-stability figure reads.
     """
     from safl_bench.evaluation import evaluate_method
+    from safl_bench.method import method_input
     from safl_bench.tasks.registry import make
 
     tasks = []
     for task_id in task_ids:
-        task = make(task_id, kitti_root=kitti_root, progress=progress)
+        task = make(task_id, kitti_root=kitti_root, bev_root=bev_root, bev_resolution_m=bev_resolution_m,
+                    progress=progress)
         task.prepare(["topview"])
         tasks.append(task)
 
     def callback(epoch: int, method: Any) -> dict[str, Any]:
         aucs: dict[str, float | None] = {}
         for task in tasks:
-            result = evaluate_method(method, task.queries("topview"), task.database("topview"), task.truth)
+            result = evaluate_method(method, method_input(method, task.queries("topview")),
+                                     method_input(method, task.database("topview")), task.truth)
             aucs[task.spec.condition.name] = result.metrics["sequence"].roc_auc
         return {"val_auc": aucs, "val_tasks": [t.id for t in tasks], "source": source_label}
 
@@ -92,15 +104,17 @@ def validation_callback(task_ids: list[str], source_label: str, kitti_root: str 
 
 
 def load_training_maps(source: Any, sequences: list[str], step: int, progress: bool) -> tuple[np.ndarray, dict[str, int]]:
-    """Clean top-view maps of every `step`-th frame of `sequences`, concatenated."""
+    """Clean top-view maps of every `step`-th frame of `sequences`, concatenated (an image
+    source's images as they are: the caller resamples them to the method's input size)."""
     from safl_bench import mapcache
     from safl_bench.mapconfig import MapConfig
     from safl_bench.noise import CLEAN
 
+    config = None if source.kind == "bev" else MapConfig()
     parts, counts = [], {}
     for name in sequences:
         frames = np.arange(0, len(source.sequence(name)), step, dtype=np.int64)
-        views = mapcache.load_views(source, name, MapConfig(), frames=frames, condition=CLEAN, seed=0,
+        views = mapcache.load_views(source, name, config, frames=frames, condition=CLEAN, seed=0,
                                     kind="topview", progress=progress)
         parts.append(np.asarray(views))
         counts[name] = len(frames)
@@ -112,8 +126,9 @@ def main(args: argparse.Namespace) -> int:
     import torch
 
     from safl_bench import paths, provenance
+    from safl_bench.method import method_input
     from safl_bench.method_registry import method_class
-    from safl_bench.sources import kitti_source, synth_source
+    from safl_bench.sources import DataSource, bev_source, kitti_source, synth_source
     from safl_bench.training import CHECKPOINT, AdversarialMethod, save_reconstructions
 
     cls = method_class(args.method)
@@ -138,12 +153,21 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError(f"method {cls.name!r} has no parameter(s) {unknown}; valid: {cls._param_names()}")
     method = cls(**params)
 
-    if args.kitti_root is not None:
-        if args.synth_seed is not None:
-            raise ConfigError("--synth-seed applies to the synthetic data only, not with --kitti-root")
+    kind = source_kind(args)
+    if kind != "synth" and args.synth_seed is not None:
+        raise ConfigError("--synth-seed applies to the synthetic data only, not with --kitti-root or --bev-root")
+    if kind == "kitti":
         sequences = args.sequences.split(",") if args.sequences else list(KITTI_TRAIN_SEQUENCES)
-        source = kitti_source(args.kitti_root)
+        source: DataSource = kitti_source(args.kitti_root)
         tag = "kitti"
+    elif kind == "bev":
+        sequences = args.sequences.split(",") if args.sequences else list(BEV_TRAIN_SEQUENCES)
+        held_out = sorted(set(sequences) & set(BEV_HELD_OUT))
+        if held_out:
+            print(f"safl-bench: warning: training on {', '.join(held_out)}: KITTI 00 is the test "
+                  "sequence and 05, 06 are for evaluation only", file=sys.stderr)
+        source = bev_source(args.bev_root, args.bev_resolution)
+        tag = "bev"
     else:
         from safl_bench import synth
 
@@ -157,11 +181,13 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError(f"{out} already holds a training run; pass --resume to continue it or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
 
-    maps, counts = load_training_maps(source, sequences, args.step, progress)
-    val_tasks = args.val_task if args.val_task is not None else default_val_tasks(args.kitti_root is not None)
+    raw, counts = load_training_maps(source, sequences, args.step, progress)
+    maps = method_input(method, raw)
+    val_tasks = args.val_task if args.val_task is not None else default_val_tasks(kind)
     if [t.lower() for t in val_tasks] == ["none"]:
         val_tasks = []
-    callback = validation_callback(val_tasks, source.label, args.kitti_root, progress) if val_tasks else None
+    callback = (validation_callback(val_tasks, source.label, args.kitti_root, progress, args.bev_root,
+                                    args.bev_resolution) if val_tasks else None)
     print(f"training {cls.name} on {len(maps)} maps of {source.label} {', '.join(sequences)} -> {out}", file=sys.stderr)
     method.fit(maps, checkpoint_dir=out, callback=callback, progress=progress)
 
@@ -177,7 +203,8 @@ def main(args: argparse.Namespace) -> int:
         "command": "safl-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
         "method": method.config(),
         "data": {"source": source.label, "kind": source.kind, "sequences": counts, "step": args.step,
-                 "maps": len(maps), "fingerprint": data_fingerprint(maps)},
+                 "maps": len(maps), "fingerprint": data_fingerprint(maps),
+                 "input": f"{raw.shape[1]}x{raw.shape[2]} views as {maps.shape[1]}x{maps.shape[2]}"},
         "environment": {"python": env.python, "libraries": env.libraries, "cpu": env.cpu_model,
                         "torch_threads": env.torch_threads, "git": env.git_revision},
     })
