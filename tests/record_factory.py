@@ -42,16 +42,16 @@ def make_record(
     auc: float = 0.9,
     f1: float = 0.7,
     single_recall: float | None = None,
+    recall_at_1: float | None = None,
     ms: float = 10.0,
     modes: tuple[str, ...] = ("sequence", "single_frame"),
     spec_fingerprint: str = "abcd1234",
     created: str = "2025-01-01T00:00:00Z",
 ) -> ResultRecord:
     """A complete record; the single-frame mode scores lower than the sequence mode by default."""
-    if protocol == "paper":
-        task_id = f"SAFL/{'Synth' if source_kind == 'synth' else 'KITTI'}{sequence}-{condition}-v{task_version}"
-    else:
-        task_id = f"SAFL/{'Synth' if source_kind == 'synth' else 'KITTI'}{sequence}-Revisit-v{task_version}"
+    prefix = {"synth": "Synth", "kitti": "KITTI", "bev": "BEVKITTI"}[source_kind]
+    suffix = {"paper": condition, "revisit": "Revisit", "bevplace": "BEVPlace"}[protocol]
+    task_id = f"SAFL/{prefix}{sequence}-{suffix}-v{task_version}"
     results = {}
     for mode in modes:
         scale = 1.0 if mode == "sequence" else 0.5
@@ -64,6 +64,9 @@ def make_record(
                 extended_precision=0.5 + r / 2,
                 n_queries=100,
                 n_positives=80,
+                recall_at_1=None if recall_at_1 is None else recall_at_1 * scale,
+                recall_at_n=(None if recall_at_1 is None or mode == "sequence"
+                             else {"1": recall_at_1 * scale, "5": min(1.0, recall_at_1 * scale + 0.1)}),
             ),
             **curves(10.0 * auc * scale),
         )

@@ -154,7 +154,7 @@ def test_point_methods_get_one_line_on_an_image_source(bev_root, safl_home, tmp_
                      "--bev-root", str(bev_root), "--task", REVISIT])
     err = capsys.readouterr().err
     assert code == 2
-    assert "top-view images at" in err and "has no points views" in err
+    assert "KITTI top-view images at" in err and "has no points views" in err
     assert "Traceback" not in err
 
 

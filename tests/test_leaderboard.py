@@ -13,7 +13,13 @@ from safl_bench.cli import main as cli_main
 from safl_bench.errors import DataError
 from safl_bench.leaderboard import build_leaderboard
 from safl_bench.leaderboard.grouping import Cell, aggregate, condition_order, group_records
-from safl_bench.leaderboard.tables import auc_table, recall_table, revisit_table, time_table
+from safl_bench.leaderboard.tables import (
+    auc_table,
+    bevplace_table,
+    recall_table,
+    revisit_table,
+    time_table,
+)
 from safl_bench.leaderboard.training_logs import read_training_log
 from safl_bench.records import ResultRecord, load_records, write_record
 
@@ -130,7 +136,7 @@ def test_records_of_an_older_task_spec_are_left_out_with_a_note() -> None:
 
 def test_revisit_table() -> None:
     records = [
-        make_record("a", protocol="revisit", sequence="00", recall=0.5, auc=0.9, f1=0.8),
+        make_record("a", protocol="revisit", sequence="00", recall=0.5, auc=0.9, f1=0.8, recall_at_1=0.9),
         make_record("a", protocol="revisit", sequence="09", recall=0.4, auc=0.8, f1=0.6),
         make_record("b", protocol="revisit", sequence="00", recall=0.3, auc=0.7, f1=0.5),
     ]
@@ -138,13 +144,29 @@ def test_revisit_table() -> None:
     assert "revisit protocol, task version v0" in md.splitlines()[0]
     rows = _rows(md)
     assert rows[0] == (
-        "| Method | Version | Matching | 00 F1max | 00 R@100P (%) | 00 AUC "
-        "| 09 F1max | 09 R@100P (%) | 09 AUC |"
+        "| Method | Version | Matching | 00 F1max | 00 R@100P (%) | 00 AUC | 00 R@1 (%) "
+        "| 09 F1max | 09 R@100P (%) | 09 AUC | 09 R@1 (%) |"
     )
-    assert (
-        rows[1] == "| a | 1 | sequence | **0.800** | **50.0** | **0.900** | 0.600 | 40.0 | 0.800 |"
-    )
-    assert rows[3] == "| b | 1 | sequence | 0.500 | 30.0 | 0.700 | — | — | — |"
+    assert rows[1] == ("| a | 1 | sequence | **0.800** | **50.0** | **0.900** | 90.0 | 0.600 | 40.0 "
+                       "| 0.800 | n/a |")
+    assert rows[3] == "| b | 1 | sequence | 0.500 | 30.0 | 0.700 | n/a | — | — | — | — |"
+
+
+def test_bevplace_table_and_the_published_rows_beside_it(tmp_path) -> None:
+    records = [
+        make_record("sad", protocol="bevplace", condition=None, sequence=s, source_kind="bev",
+                    source_label="KITTI top-view images", recall_at_1=r)
+        for s, r in (("00", 0.8), ("02", 0.6))
+    ]
+    md = _table(records, bevplace_table).markdown()
+    rows = _rows(md)
+    assert rows[0].startswith("| Method | Version | Matching | 00 R@1 (%) | 00 R@5 (%) | 00 R@10 (%)")
+    assert rows[2].startswith("| sad | 1 | single-frame | 40.0 | 50.0 | n/a | 0.350 | 30.0 |")
+    build_leaderboard(records, tmp_path / "lb", figures=False)
+    index = (tmp_path / "lb" / "index.md").read_text()
+    assert "BEVPlace's protocol: Recall@1, @5, @10 and F1max" in index  # inline for real KITTI
+    assert "| BEVPlace (published) | 99.7 | 98.1 | 99.3 | 100.0 |" in index
+    assert "not run here" in index
 
 
 def test_condition_order_follows_the_paper() -> None:
@@ -183,7 +205,7 @@ def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> Non
         "tables/all-results.csv",
         *(
             f"tables/{SRC}/paper-00-v0-{t}.{ext}"
-            for t in ("recall", "auc", "time")
+            for t in ("recall", "recall-at-1", "auc", "time")
             for ext in ("md", "csv")
         ),
         f"tables/{SRC}/revisit-v0.md",

@@ -32,7 +32,10 @@ from safl_bench.leaderboard.tables import (
     Table,
     all_results_frame,
     auc_table,
+    bevplace_table,
     frame_csv,
+    published_bevplace_markdown,
+    recall_at_1_table,
     recall_table,
     revisit_table,
     time_table,
@@ -63,6 +66,7 @@ class _Entry:
     key: TableKey
     tables: list[tuple[str, str]] = field(default_factory=list)  # (label, md path)
     figures: list[tuple[str, str]] = field(default_factory=list)  # (label, png path)
+    inline: list[str] = field(default_factory=list)  # Markdown shown in the index itself
 
 
 class _Writer:
@@ -120,6 +124,7 @@ def build_leaderboard(
             heatmap = f"figures/{base}-auc-heatmap.png"
             for label, table, stem in (
                 ("Recall at 100 % precision (Table II)", recall, "recall"),
+                ("Recall@1", recall_at_1_table(key, group, notes), "recall-at-1"),
                 ("ROC AUC (Figure 13)", auc, "auc"),
                 ("ms per frame (Table III)", timing, "time"),
             ):
@@ -144,13 +149,13 @@ def build_leaderboard(
                         )
                     )
         else:
-            table = revisit_table(key, group, notes)
-            entry.tables.append(
-                (
-                    "F1max, recall at 100 % precision, AUC",
-                    writer.text(f"tables/{base}.md", table.markdown(level=1)),
-                )
-            )
+            bevplace = key.protocol == "bevplace"
+            table = (bevplace_table if bevplace else revisit_table)(key, group, notes)
+            md = table.markdown(level=1) + ("\n" + published_bevplace_markdown(2) if bevplace else "")
+            label = "Recall@1/5/10, F1max" if bevplace else "F1max, recall at 100 % precision, AUC, Recall@1"
+            entry.tables.append((label, writer.text(f"tables/{base}.md", md)))
+            if key.source_kind == "bev":  # real KITTI: its tables stand in the index itself
+                entry.inline = [table.markdown(level=4)] + ([published_bevplace_markdown(4)] if bevplace else [])
             writer.text(f"tables/{base}.csv", table.csv())
             if figures:
                 rel = f"figures/{base}-pr.png"
@@ -217,6 +222,7 @@ def _index(
         what = (
             f"Paper protocol, sequence {key.sequence}"
             if key.protocol == "paper"
+            else "BEVPlace's protocol" if key.protocol == "bevplace"
             else f"{key.protocol.capitalize()} protocol"
         )
         lines += [f"### {what}, task version v{key.task_version}", ""]
@@ -229,6 +235,8 @@ def _index(
                 "- Figures: " + " · ".join(f"[{label}]({png})" for label, png in entry.figures)
             )
         lines.append("")
+        for block in entry.inline:
+            lines += [block.rstrip("\n"), ""]
     if figures:
         lines += ["## Training stability (Figure 14)", ""]
         if training:

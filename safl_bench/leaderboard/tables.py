@@ -2,7 +2,9 @@
 
 Shapes follow the paper: Table II (recall at 100 % precision, rows = methods, columns = the
 twelve noise conditions), the AUC table of Figure 13, Table III (feature inference time in ms per
-frame), plus the revisit-protocol table (F1max, recall at 100 % precision and AUC per sequence).
+frame), Recall@1 per condition, plus the revisit-protocol table (F1max, recall at 100 % precision,
+AUC and Recall@1 per sequence) and BEVPlace's protocol (Recall@1/5/10 per sequence, beside the
+Recall@1 that BEVPlace's paper publishes: `PUBLISHED_BEVPLACE`).
 Each method has one row per matching mode ("sequence" = SeqSLAM, "single-frame" = nearest
 neighbour), so a reader sees what the sequence matcher adds. Output is deterministic: rows are
 sorted, floats have a fixed number of decimals, and nothing depends on the clock or the machine.
@@ -251,6 +253,15 @@ def _matcher_notes(records: list[ResultRecord]) -> list[str]:
 
 
 def _metric(name: str) -> Callable[[Metrics], float | None]:
+    """Getter of a record metric by name; "recall_at_N" (N > 1) reads `recall_at_n[N]`."""
+    top = re.fullmatch(r"recall_at_(\d+)", name)
+    if top and top.group(1) != "1":
+
+        def get_n(metrics: Metrics) -> float | None:
+            return (metrics.recall_at_n or {}).get(top.group(1))
+
+        return get_n
+
     def get(metrics: Metrics) -> float | None:
         value: float | None = getattr(metrics, name)
         return value
@@ -307,6 +318,14 @@ def recall_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str
     )
 
 
+def recall_at_1_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """Recall@1 (%) per method and condition: the fraction of queries with a true place whose
+    reported match is one (single-frame: the nearest database frame)."""
+    return paper_metric_table(
+        key, records, metric="recall_at_1", title="Recall@1 (%)", fmt=RECALL_FORMAT, notes=notes
+    )
+
+
 def auc_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
     """The AUC of the ROC curve per method and condition (the paper's Figure 13 as a table)."""
     return paper_metric_table(
@@ -344,33 +363,52 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
     )
 
 
-REVISIT_METRICS: tuple[tuple[str, str, ValueFormat], ...] = (
+Metric = tuple[str, str, ValueFormat]
+
+REVISIT_METRICS: tuple[Metric, ...] = (
     ("f1_max", "F1max", F1_FORMAT),
     ("recall_at_100_precision", "R@100P (%)", RECALL_FORMAT),
     ("auc", "AUC", AUC_FORMAT),
+    ("recall_at_1", "R@1 (%)", RECALL_FORMAT),
+)
+BEVPLACE_METRICS: tuple[Metric, ...] = (
+    ("recall_at_1", "R@1 (%)", RECALL_FORMAT),
+    ("recall_at_5", "R@5 (%)", RECALL_FORMAT),
+    ("recall_at_10", "R@10 (%)", RECALL_FORMAT),
+    ("f1_max", "F1max", F1_FORMAT),
 )
 
+#: Recall@1 (%) on KITTI 00 / 02 / 05 / 06 under BEVPlace's protocol, as BEVPlace's paper (Luo
+#: et al., ICCV 2023) publishes them; shown beside the measured rows, never mixed with them.
+PUBLISHED_BEVPLACE: dict[str, tuple[float, float, float, float]] = {
+    "BEVPlace": (99.7, 98.1, 99.3, 100.0),
+    "ResNet18+NetVLAD": (95.9, 83.2, 90.3, 98.5),
+    "OverlapTransformer": (96.7, 80.1, 91.9, 95.6),
+}
+PUBLISHED_SEQUENCES = ("00", "02", "05", "06")
 
-def revisit_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
-    """Revisit protocol: F1max, recall at 100 % precision and AUC per method and sequence."""
+
+def sequence_table(key: TableKey, records: list[ResultRecord], metrics: tuple[Metric, ...], title: str,
+                   notes: Iterable[str] = ()) -> Table:
+    """Rows = (method, version, matching mode), columns = `metrics` per sequence."""
     sequences = sorted({r.task.sequence for r in records})
     columns: list[str] = []
     formats: list[ValueFormat] = []
     for sequence in sequences:
-        for _, label, fmt in REVISIT_METRICS:
+        for _, label, fmt in metrics:
             columns.append(f"{sequence} {label}")
             formats.append(fmt)
 
     def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
         for mode, result in record.results.items():
             row = (record.method.name, record.method.version, mode)
-            for metric, label, _ in REVISIT_METRICS:
+            for metric, label, _ in metrics:
                 yield row, f"{record.task.sequence} {label}", _metric(metric)(result.metrics)
 
     table = _build(
         key,
         records,
-        title="Revisit protocol: F1max, recall at 100 % precision, AUC",
+        title=title,
         row_header=("Method", "Version", "Matching"),
         columns=columns,
         formats=formats,
@@ -378,6 +416,35 @@ def revisit_table(key: TableKey, records: list[ResultRecord], notes: Iterable[st
         notes=notes,
     )
     return _label_modes(table)
+
+
+def revisit_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """Revisit protocol: F1max, recall at 100 % precision, AUC and Recall@1 per method and sequence."""
+    return sequence_table(key, records, REVISIT_METRICS,
+                          "Revisit protocol: F1max, recall at 100 % precision, AUC, Recall@1", notes)
+
+
+def bevplace_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
+    """BEVPlace's protocol: Recall@1/5/10 (single-frame: the nearest database frames; sequence:
+    the matcher's one answer, R@1 only) and F1max per method and sequence."""
+    return sequence_table(key, records, BEVPLACE_METRICS,
+                          "BEVPlace's protocol: Recall@1, @5, @10 and F1max", notes)
+
+
+def published_bevplace_markdown(level: int = 3) -> str:
+    """BEVPlace's published Recall@1 rows as a Markdown table, marked as not run here."""
+    lines = [
+        f"{'#' * level} Published Recall@1 (%), BEVPlace's protocol (not run here)",
+        "",
+        "From BEVPlace's paper (Luo et al., ICCV 2023, Table 1), as published; not computed by "
+        "safl-bench. Compare with the single-frame R@1 above.",
+        "",
+        "| Method | " + " | ".join(PUBLISHED_SEQUENCES) + " |",
+        "|---|" + "---:|" * len(PUBLISHED_SEQUENCES),
+    ]
+    for name, values in PUBLISHED_BEVPLACE.items():
+        lines.append(f"| {name} (published) | " + " | ".join(f"{v:.1f}" for v in values) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _label_modes(table: Table) -> Table:
@@ -410,6 +477,8 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                     "auc": _num(m.auc, 4),
                     "f1_max": _num(m.f1_max, 4),
                     "extended_precision": _num(m.extended_precision, 4),
+                    "recall_at_1": _num(m.recall_at_1, 4),
+                    **{f"recall_at_{n}": _num((m.recall_at_n or {}).get(n), 4) for n in ("5", "10")},
                     "n_queries": m.n_queries,
                     "n_positives": m.n_positives,
                     "describe_ms_per_frame": _num(r.timings.describe_ms_per_frame, 3),

@@ -233,4 +233,4 @@ def bev_source(root: str | Path, resolution_m: float = DEFAULT_RESOLUTION_M) -> 
     path = Path(root).expanduser()
     if not path.is_dir():
         raise DataError(f"top-view image root {path} does not exist or is not a directory")
-    return BevSource(root=path, label="top-view images", resolution_m=float(resolution_m))
+    return BevSource(root=path, label="KITTI top-view images", resolution_m=float(resolution_m))
