@@ -6,6 +6,8 @@
                                                  problem, peak memory, ratio to the plain loop
   safl-bench bench parallel [--workers 2]        map building 1 worker against N, seconds per
                                                  cell serially, on local workers and on Ray
+  safl-bench bench images --bev-root DIR         reading a top-view image sequence, cold and
+                                                 cached
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -22,7 +24,7 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher", "parallel"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
     parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v0)")
     parser.add_argument("--frames", type=int, default=50, help="frames per timed batch-1 run (default 50)")
@@ -37,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "default where Ray is installed), 'auto', 'ray://HOST:10001' or 'none'")
     parser.add_argument("--kitti-root", metavar="DIR", default=None,
                         help="parallel: KITTI odometry root (default: the synthetic default)")
+    parser.add_argument("--bev-root", metavar="DIR", default=None,
+                        help="images: the top-view image folders (BEVPlace's layout); --sequence picks one")
     parser.add_argument("--json", help="also write every figure, with the environment, to this JSON file")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -55,6 +59,16 @@ def main(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     if args.what == "parallel":
         return _parallel(args)
+    if args.what == "images":
+        from safl_bench import source_bench
+
+        if args.bev_root is None:
+            raise ConfigError("bench images needs --bev-root DIR (top-view image folders)")
+        results = source_bench.run(args.bev_root, args.sequence, repeats=args.repeats)
+        print(source_bench.format_results(results))
+        if args.json:
+            atomic_write_json(args.json, results)
+        return 0
     if args.what == "matcher":
         from safl_bench import matching_bench
 

@@ -220,7 +220,11 @@ class BevSource(DataSource):
         for kind in kinds:
             self.check_kind(kind)
         frames = check_frames(frames, len(self.sequence(name)), name)
-        images = self.images(name, progress=progress)[frames]
+        steps = np.diff(frames)
+        if len(frames) > 1 and steps[0] > 0 and (steps == steps[0]).all():  # a view: no copy
+            images = self.images(name, progress=progress)[frames[0]:frames[-1] + 1:steps[0]]
+        else:
+            images = self.images(name, progress=progress)[frames]
         out: dict[tuple[str, str], np.ndarray | list[np.ndarray]] = {}
         for label, offset in offsets.items():
             moved = images if offset is None else move_viewpoint(images, offset, self.resolution_m)
