@@ -35,6 +35,7 @@ from safl_bench.method import INPUT_KINDS, Method
 ENTRY_POINT_GROUP = "safl_bench.methods"
 BUILTIN_MODULES: tuple[str, ...] = (
     "baselines.sad", "baselines.bigan", "methods.stable_afl", "baselines.scan_context", "baselines.m2dp",
+    "baselines.bevplace",
 )
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.\-]*$")
 
@@ -183,6 +184,12 @@ def method_class(name: str) -> type[Method]:
     raise RegistryError(f"unknown method {name!r}{hint} (known: {', '.join(known) or 'none'})")
 
 
+def _ships_weights(cls: type[Method]) -> bool:
+    """A method that is not trained here but runs published weights shipped with it (class
+    attribute `ships_weights = True`; its constructor loads them)."""
+    return bool(getattr(cls, "ships_weights", False))
+
+
 def shipped_weights_path(cls: type[Method], source: str | None = None) -> Path | None:
     """The weights file shipped beside the method's module: `weights/<name>-<source>.safetensors`
     (trained on that kind of data, e.g. "bev": real KITTI top views) when `source` is given and
@@ -190,7 +197,7 @@ def shipped_weights_path(cls: type[Method], source: str | None = None) -> Path |
     method ships none (yet)."""
     module = sys.modules.get(cls.__module__)
     file = getattr(module, "__file__", None)
-    if not cls.trainable or file is None:
+    if not (cls.trainable or _ships_weights(cls)) or file is None:
         return None
     folder = Path(file).parent / "weights"
     names = ([f"{cls.name}-{source}.safetensors"] if source else []) + [f"{cls.name}.safetensors"]
@@ -208,8 +215,18 @@ def make_method(name: str, *, weights: str | Path | None = None, source: str | N
       * "shipped": the shipped weights, ConfigError when there are none;
       * "untrained": the randomly initialised networks (the honesty baseline);
       * a path: a file written by `Method.save` / `safl-bench train`.
+
+    Methods with published weights that are not trained here (`ships_weights`, e.g. BEVPlace)
+    load the shipped ones in their constructor (None or "shipped"); a path goes to `cls.load`;
+    they have no "untrained" variant.
     """
     cls = method_class(name)
+    if not cls.trainable and _ships_weights(cls):
+        if weights == "untrained":
+            raise ConfigError(f"method {name!r} runs its authors' published weights; it has no untrained variant")
+        if weights is None or weights == "shipped":
+            return _construct(cls, params)
+        return cls.load(Path(weights), **params)
     if not cls.trainable:
         if weights not in (None, "untrained"):
             raise ConfigError(f"method {name!r} learns nothing and takes no weights (got {weights!r})")
