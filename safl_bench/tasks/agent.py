@@ -48,10 +48,16 @@ class MatcherAgent:
         self.no_match = -1
         self.last_score = float("inf")
 
+    def _input(self, maps: np.ndarray) -> Any:
+        """Maps at the method's input size (`method_input`) when it is a `Method`."""
+        from safl_bench.method import Method, method_input
+
+        return method_input(self.method, maps) if isinstance(self.method, Method) else maps
+
     def reset(self, info: dict[str, Any]) -> None:
         """Describe the database given by `env.reset()`'s info."""
         database = info["database"]
-        self._database = self.method.describe(database)
+        self._database = self.method.describe(self._input(database))
         self.no_match = len(database)
         self._rows, self._limits = [], []
 
@@ -59,7 +65,7 @@ class MatcherAgent:
         """The database index matched to `observation`, or `no_match` (Ndb)."""
         if self._database is None:
             raise RuntimeError("call reset(info) with the environment's reset info first")
-        query = self.method.describe(observation[None])
+        query = self.method.describe(self._input(observation[None]))
         self._rows.append(np.asarray(self.method.distance(query, self._database))[0])
         candidates = np.asarray(info["candidates"], dtype=bool)
         self._limits.append(int(candidates.sum()))  # candidates are a prefix (time order)
