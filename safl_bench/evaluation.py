@@ -5,17 +5,24 @@ the same difference matrix: the shared SeqSLAM matcher ("sequence") and the near
 frame ("single_frame"), so a reader sees what the sequence search adds. Revisit tasks restrict
 each query to the database frames it may match (`GroundTruth.db_limit`). Single-frame results
 also carry Recall@N (`RECALL_AT`), the retrieval literature's measure, from the same matrix.
+
+Two evaluation-level settings (`EvaluationConfig`; both off by default, the paper's protocol)
+reproduce the authors' public code (`safl_bench.matcher_presets`, preset "authors"):
+``max_frames`` keeps only the first N of the task's frames on both sides (their ``test_len``),
+and ``trim_queries`` matches every query but leaves the first and last N out of the metrics
+(their PR curve starts ``ds + 10`` queries in). The matches keep every query either way.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from safl_bench.errors import DataError
+from safl_bench.errors import ConfigError, DataError
 from safl_bench.groundtruth import EXCLUDED, TP, GroundTruth
 from safl_bench.matching import MatcherConfig, MatchResult, match
 from safl_bench.method import Method
@@ -27,25 +34,79 @@ MODES = ("sequence", "single_frame")
 RECALL_AT = (1, 5, 10)
 
 
+#: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
+EVALUATION_SETTINGS = ("max_frames", "trim_queries")
+
+
 @dataclass(frozen=True)
 class EvaluationConfig:
-    """The matcher settings of an evaluation (recorded with every result)."""
+    """The matcher settings of an evaluation (recorded with every result).
+
+    max_frames: use only the first N frames of the task (of its every-`step`-th frames) as
+    database AND queries (None: all). trim_queries: leave the first and the last N queries out
+    of the metrics (they are still matched, and their trajectories use their neighbours).
+    """
 
     sequence: MatcherConfig = field(default_factory=MatcherConfig)
+    max_frames: int | None = None
+    trim_queries: int = 0
+
+    def __post_init__(self) -> None:
+        n = self.max_frames
+        if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
+            raise ConfigError(f"max_frames must be null (all frames) or an integer >= 1, got {n!r}")
+        t = self.trim_queries
+        if not isinstance(t, int) or isinstance(t, bool) or t < 0:
+            raise ConfigError(f"trim_queries must be an integer >= 0, got {t!r}")
 
     @property
     def single_frame(self) -> MatcherConfig:
         """The no-sequence baseline (`matching.single_frame`'s settings: one frame, no contrast
-        enhancement), scored like the sequence matcher."""
+        enhancement), scored like the sequence matcher, except that the authors' capped 1/S
+        ("inverse", a quirk of their sequence matcher: on raw differences below 1 it would cap
+        every query and, with ``capped_match``, answer frame 1 for all) becomes "min", its
+        ranking without the quirks. The recorded ``single_frame`` settings say which."""
         seq = self.sequence
+        if seq.score == "inverse":
+            return MatcherConfig(method="single_frame", ds=0, enhance_window=0, score="min",
+                                 ratio_window=seq.ratio_window, dtype=seq.dtype, preset=seq.preset)
         return MatcherConfig(method="single_frame", ds=0, enhance_window=0, score=seq.score,
-                             ratio_window=seq.ratio_window, dtype=seq.dtype)
+                             ratio_window=seq.ratio_window, dtype=seq.dtype, shift=seq.shift,
+                             preset=seq.preset)
 
     def matcher(self, mode: str) -> MatcherConfig:
         return self.sequence if mode == "sequence" else self.single_frame
 
     def to_dict(self) -> dict[str, Any]:
-        return {mode: self.matcher(mode).to_dict() for mode in MODES}
+        """What records store: each mode's matcher settings, and the evaluation-level ones."""
+        out: dict[str, Any] = {mode: self.matcher(mode).to_dict() for mode in MODES}
+        out["evaluation"] = {name: getattr(self, name) for name in EVALUATION_SETTINGS}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EvaluationConfig:
+        """The config a record's ``matcher`` field describes (`to_dict`'s inverse; the
+        single-frame settings follow from the sequence ones). A record made before a setting
+        existed is read with that setting's default, which is what its code did."""
+        if not isinstance(data, dict) or not isinstance(data.get("sequence"), dict):
+            raise ConfigError(f"matcher settings need a 'sequence' mapping, got {data!r}")
+        extra = data.get("evaluation", {})
+        if not isinstance(extra, dict) or set(extra) - set(EVALUATION_SETTINGS):
+            raise ConfigError(f"evaluation settings: expected keys of {list(EVALUATION_SETTINGS)}, "
+                              f"got {extra!r}")
+        return cls(MatcherConfig.from_dict(data["sequence"]), **extra)
+
+
+def same_settings(recorded: Any, wanted: dict[str, Any]) -> bool:
+    """Whether a record's ``matcher`` field holds the settings `wanted` (an
+    `EvaluationConfig.to_dict()`), reading settings the record predates as their defaults: a
+    record made before the presets existed is the "paper" preset. Never raises."""
+    if recorded == wanted:
+        return True
+    try:
+        return EvaluationConfig.from_dict(recorded).to_dict() == wanted
+    except (ConfigError, TypeError):
+        return False
 
 
 @dataclass
@@ -98,8 +159,13 @@ def evaluate_method(
     config: EvaluationConfig | None = None,
     revisit: bool = False,
 ) -> Evaluation:
-    """Run `method` on one task's views and score both matching modes."""
+    """Run `method` on one task's views and score both matching modes (`config.max_frames`
+    limits both sides first; `config.trim_queries` leaves queries at the ends out of the
+    metrics, not out of the matches)."""
     cfg = config or EvaluationConfig()
+    if cfg.max_frames is not None:
+        queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
+        truth = subset_truth(truth, slice(0, cfg.max_frames), slice(0, cfg.max_frames))
     D, describe_s, n = difference_matrix(method, queries, database)
     limit = truth.db_limit() if revisit else None
     matches: dict[str, MatchResult] = {}
@@ -108,7 +174,38 @@ def evaluate_method(
         t0 = time.perf_counter()
         matches[mode] = match(D, cfg.matcher(mode), db_limit=limit)
         seconds[mode] = time.perf_counter() - t0
-    metrics = {mode: score_matches(truth, matches[mode]) for mode in MODES}
+    scored = scored_queries(len(D), cfg.trim_queries)
+    part = subset_truth(truth, scored, slice(None)) if cfg.trim_queries else truth
+    metrics = {mode: score_matches(part, subset_result(matches[mode], scored)) for mode in MODES}
     metrics["single_frame"].recall_at_n = retrieval_recall(
-        D, truth.has_loop, lambda q, j: truth.label_of(q, j) == TP, RECALL_AT, db_limit=limit)
+        D[scored], part.has_loop, lambda q, j: part.label_of(q, j) == TP, RECALL_AT,
+        db_limit=None if limit is None else limit[scored])
     return Evaluation(matches, metrics, describe_s, n, seconds["sequence"])
+
+
+def scored_queries(n_queries: int, trim: int) -> slice:
+    """The queries the metrics see: all but the first and the last `trim` (`trim_queries`)."""
+    if 2 * trim >= n_queries:
+        raise ConfigError(f"trim_queries={trim} leaves none of the {n_queries} queries to evaluate")
+    return slice(trim, n_queries - trim)
+
+
+def subset_truth(truth: GroundTruth, queries: slice, database: slice) -> GroundTruth:
+    """The ground truth of a slice of the queries and of the database."""
+    return dataclasses.replace(
+        truth,
+        query_positions=truth.query_positions[queries], query_times=truth.query_times[queries],
+        database_positions=truth.database_positions[database],
+        database_times=truth.database_times[database],
+    )
+
+
+def subset_result(result: MatchResult, queries: slice) -> MatchResult:
+    """The matches of a slice of the queries (the whole result for the full slice)."""
+    if queries == slice(0, len(result.index)):
+        return result
+    return dataclasses.replace(
+        result, index=result.index[queries], score=result.score[queries],
+        best_s=result.best_s[queries], velocity=result.velocity[queries],
+        n_terms=result.n_terms[queries], complete=result.complete[queries],
+        S=None if result.S is None else result.S[queries])

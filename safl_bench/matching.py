@@ -6,7 +6,9 @@ database frame, LOWER = more similar. ``MatchResult.score`` is also lower = bett
 confidence (higher = better) and get it from `safl_bench.metrics.confidence_from_score`, the one
 place where the sign is flipped (``MatchResult.confidence`` calls it).
 
-Definition followed (the paper's, with the choices it leaves open written down):
+Definition followed (the paper's, with the choices it leaves open written down). The defaults
+are the paper's; `safl_bench.matcher_presets` names whole sets of these settings ("paper",
+"authors": the authors' public code, "openseqslam") and says where each value comes from.
 
 1. Local contrast enhancement (Eq. 5), along the database axis, per query row ``i``::
 
@@ -16,8 +18,11 @@ Definition followed (the paper's, with the choices it leaves open written down):
    paper [8] the authors cite for this step) or ``[j - R, j]`` ("causal", option),
    ``R = enhance_window`` (0 disables). A window of one frame (causal, j = 0) or a window with (numerically) zero spread, i.e. variance
    <= 1e-12 x the variance of the whole row, gives ``Dhat = 0``. Then, as in OpenSeqSLAM, the
-   whole enhanced matrix is shifted so that its minimum is 0 (this does not change any match; it
-   makes S >= 0, which the ratio score needs).
+   whole enhanced matrix is shifted so that its minimum is 0 (``shift=True``, default: this
+   does not change any match and makes S >= 0, which the ratio score needs). ``shift=False``
+   keeps the z-scores as they are, so S is negative for a good match (the authors' code, whose
+   ``enhanceContrast`` has the shift commented out); it matters only to the ``"inverse"`` and
+   ``"ratio"`` scores. `enhanced_matrix` returns exactly the matrix the search reads.
 2. Sequence search (Eq. 6-7). For query ``T`` and candidate database frame ``j`` (the frame
    reported as the match of ``T``), a straight trajectory at velocity ``V`` visits, for each query
    row ``T + u``, the database column ``j + round(V u)`` (round half up). The paper's trajectory
@@ -26,32 +31,53 @@ Definition followed (the paper's, with the choices it leaves open written down):
    (``trajectory="centred"``, option; needs future queries). The paper's Eq. 7 prints
    ``k = s - V(d_s - T + t)``; the minus sign would run the database backwards while the queries
    run forwards and is taken as a typo of Milford & Wyeth's ``+``.
+   ``offset_rounding="floor_start"`` (option; OpenSeqSLAM's and the authors' code) anchors the
+   trajectory at its FIRST query instead: its k-th point (k = 0 .. ds) lies at database frame
+   ``j0 + floor(V k)`` (computed as ``floor(k * V)`` in float64), and the frame reported is
+   ``j0 + (number of trajectory queries before T)`` (``j0 + ds/2`` for the centred trajectory)
+   whatever V is, so at V != 1 the reported frame need not be the point the trajectory visits
+   at ``T``. The default ``"half_up"`` is the definition above, symmetric about ``T``.
    ``S(T, j, V)`` is the MEAN of ``Dhat`` over the trajectory's points: for a full trajectory
    this is the paper's sum divided by the constant ``ds + 1`` (same ranking), and it keeps
    shortened trajectories (below) on the same scale. ``S(T, j) = min_V S(T, j, V)``, and the
    match of ``T`` is ``argmin_j S(T, j)`` (ties: lowest velocity, then lowest ``j``).
 3. Velocities: ``V_min, V_min + V_step, ..., V_max`` computed as ``round(V_min + k V_step, 9)``
    (no accumulated steps). The paper's Table I lists V from 0.8 to 1.1 by 0.1, four velocities,
-   so ``V_max`` is included (``v_inclusive=True``, default). The authors' public code uses
-   ``arange(vmin, vmax, step)`` with vmax 1.2, which is the same four velocities:
-   ``v_inclusive=False, v_max=1.2``.
+   so ``V_max`` is included (``v_inclusive=True``, default). The authors' public code
+   (``getMatches`` in src/util/utils.py) and OpenSeqSLAM take ``int(vmin ds) .. int(vmax ds)``
+   (inclusive) divided by ``ds``, with vmax = 1.2 (parameters.py; OpenSeqSLAM's default too):
+   five velocities, 0.8 to 1.2, i.e. ``v_max=1.2`` here (the same floats, since
+   ``round(0.8 + 0.1 k, 9)`` and ``(8 + k) / 10`` are the same doubles).
 4. Queries near the ends of the query sequence (``T < ds`` for the causal trajectory) have fewer
    than ``ds + 1`` rows: ``edge_queries="shorten"`` (default) uses the rows that exist (mean over
    them; ``n_terms`` records how many, ``complete`` flags full ones); ``edge_queries="skip"``
-   reports no match for them (index -1, score +inf).
+   reports no match for them (index -1, score +inf); with the centred trajectory these are the
+   first ``ds - ds//2`` and the last ``ds//2`` queries (OpenSeqSLAM and the authors' code).
 5. Trajectory points whose database column falls outside ``[0, Ndb)``:
    ``out_of_range="exclude"`` (default, as OpenSeqSLAM, which pads with +inf) drops that
    (j, V) candidate; ``"clip"`` reads the first/last column instead.
 6. Score: ``score="min"`` (default, the paper: a loop closure is declared when S is below a
    threshold) is ``S(T, j*)``; ``score="ratio"`` (OpenSeqSLAM) is ``S(T, j*)`` over the lowest
    ``S(T, j)`` with ``|j - j*| > ratio_window // 2``, in [0, 1], comparable across queries; it is
-   1.0 (no evidence) when there is no such j or that S is 0. The authors' code used ``1 / S``
-   (higher = better), which ranks queries exactly as ``"min"`` does, so it is not a separate
-   option.
+   1.0 (no evidence) when there is no such j or that S is 0 (it assumes S >= 0: ``shift=True``).
+   ``score="inverse"`` (the authors' code) ranks queries by ``min(1 / S_sum, 1)``, with
+   ``S_sum`` the trajectory's SUM (``S(T, j*)`` times the points used); ``MatchResult.score``
+   is its negative (lower = better). QUIRK, kept on purpose: without the shift a strong match
+   has a negative S, hence a negative 1/S, and ranks below every positive S, the weakest matches
+   included; and every S in [0, 1) is capped to the same top confidence 1. QUIRK 2,
+   ``capped_match`` (``score="inverse"`` only; default None): the authors' code sets the whole
+   answer to 1.0 when it caps (``match = 1.0`` assigns the frame column as well), so a capped
+   query reports database frame 1; ``capped_match=1`` reproduces that (must be < Ndb).
 7. ``db_limit`` (optional, per query): only database frames ``j < db_limit[T]`` may be reported
    as the match (the revisit protocol's "older than a time window"); the trajectory's earlier
    points lie at lower j anyway. Enhancement still uses whole rows. A query with no candidate
    gets index -1 and score +inf.
+
+``preset`` names the preset the settings started from (`safl_bench.matcher_presets`); it is
+recorded with the other settings and changes no match. Differences from the authors' code that
+are NOT settings (no result here depends on them): a window with zero spread gives 0 here, NaN
+there; a query with no trajectory inside the database gets no match here, frame ds/2 with
+score 0 there.
 
 Single-frame matching is the same machinery with ``ds = 0`` and, by default, no enhancement:
 the nearest database frame by the method's difference.
@@ -68,13 +94,18 @@ import numpy as np
 
 from .errors import ConfigError, DataError
 
-ScoreKind = Literal["min", "ratio"]
+ScoreKind = Literal["min", "ratio", "inverse"]
+SCORES = ("min", "ratio", "inverse")
 _DTYPES = {"float32": np.float32, "float64": np.float64}
 
 
 @dataclass(frozen=True)
 class MatcherConfig:
-    """Every setting that changes a match; recorded with each result (`to_dict`)."""
+    """Every setting that changes a match; recorded with each result (`to_dict`).
+
+    The defaults are the paper's (module docstring); the fields after ``dtype`` were added with
+    the presets, and a record made before them holds the defaults (`from_dict` fills them in).
+    """
 
     method: Literal["seqslam", "single_frame"] = "seqslam"
     ds: int = 10
@@ -90,6 +121,10 @@ class MatcherConfig:
     score: ScoreKind = "min"
     ratio_window: int = 10
     dtype: Literal["float32", "float64"] = "float32"
+    shift: bool = True
+    offset_rounding: Literal["half_up", "floor_start"] = "half_up"
+    capped_match: int | None = None
+    preset: str = "paper"
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -119,12 +154,23 @@ class MatcherConfig:
             bad(f"edge_queries must be 'shorten' or 'skip', got {self.edge_queries!r}")
         if self.out_of_range not in ("exclude", "clip"):
             bad(f"out_of_range must be 'exclude' or 'clip', got {self.out_of_range!r}")
-        if self.score not in ("min", "ratio"):
-            bad(f"score must be 'min' or 'ratio', got {self.score!r}")
+        if self.score not in SCORES:
+            bad(f"score must be one of {', '.join(map(repr, SCORES))}, got {self.score!r}")
         if self.ratio_window < 0:
             bad(f"ratio_window must be >= 0, got {self.ratio_window}")
         if self.dtype not in _DTYPES:
             bad(f"dtype must be 'float32' or 'float64', got {self.dtype!r}")
+        if not isinstance(self.shift, bool | np.bool_):
+            bad(f"shift must be true or false, got {self.shift!r}")
+        if self.offset_rounding not in ("half_up", "floor_start"):
+            bad(f"offset_rounding must be 'half_up' or 'floor_start', got {self.offset_rounding!r}")
+        if self.capped_match is not None and (
+                not isinstance(self.capped_match, int | np.integer)
+                or isinstance(self.capped_match, bool) or self.capped_match < 0):
+            bad(f"capped_match must be null (keep the match) or a frame index >= 0, "
+                f"got {self.capped_match!r}")
+        if not isinstance(self.preset, str) or not self.preset:
+            bad(f"preset must be a preset's name, got {self.preset!r}")
         if len(self.velocities()) == 0:
             bad("the velocity grid is empty (v_inclusive=False and v_min == v_max)")
 
@@ -144,14 +190,31 @@ class MatcherConfig:
         return -(self.ds - ahead), ahead
 
     def offsets(self) -> np.ndarray:
-        """(n_velocities, ds + 1) int64: database offset of each trajectory point from j."""
+        """(n_velocities, ds + 1) int64: database offset of each trajectory point from j, the
+        reported frame (module doc, 2: round half up about T, or floor from the start)."""
         u_lo, u_hi = self.u_range()
+        if self.offset_rounding == "floor_start":
+            k = np.arange(u_hi - u_lo + 1, dtype=np.float64)
+            return (np.floor(k[None, :] * self.velocities()[:, None]) + u_lo).astype(np.int64)
         u = np.arange(u_lo, u_hi + 1, dtype=np.float64)
         vu = np.round(self.velocities()[:, None] * u[None, :], 9)
         return np.floor(vu + 0.5).astype(np.int64)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> MatcherConfig:
+        """The config a record's settings describe (`to_dict`'s inverse). Settings a record made
+        before they existed lacks take their defaults, which is what that code did; an unknown
+        setting is a ConfigError naming it."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"matcher settings must be a mapping, got {data!r}")
+        valid = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - valid)
+        if unknown:
+            raise ConfigError(f"matcher settings: unknown setting(s) {unknown}; valid: {sorted(valid)}")
+        return cls(**data)
 
 
 @dataclass
@@ -382,6 +445,33 @@ def enhance(D: np.ndarray, window: int = 10, mode: str = "centred", *, dtype: st
     return out
 
 
+def _enhanced(arr: np.ndarray, cfg: MatcherConfig, given: Any) -> tuple[np.ndarray, float]:
+    """(the contrast-enhanced matrix, the shift that makes its minimum 0, or 0.0 without it).
+    `arr` is `given` converted; a converted copy is enhanced in place, `given` never is."""
+    if cfg.enhance_window > 0:
+        before, after = ((cfg.enhance_window // 2, cfg.enhance_window // 2)
+                         if cfg.enhance_mode == "centred" else (cfg.enhance_window, 0))
+        dh = arr if arr is not given else np.empty_like(arr)
+        _enhance_kernel(arr, dh, before, after)  # row-wise, safe in place
+    else:
+        dh = arr
+    return dh, (float(dh.min()) if cfg.shift else 0.0)
+
+
+def enhanced_matrix(D: np.ndarray, config: MatcherConfig | None = None) -> np.ndarray:
+    """The matrix the sequence search reads for `config` (module doc, 1): D contrast-enhanced
+    (Eq. 5) and, with ``shift``, moved so that its minimum is 0; a new (Nq, Ndb) array in the
+    config's dtype. `MatchResult.best_s` is the mean of this matrix over the best trajectory."""
+    cfg = config or MatcherConfig()
+    arr = _as_difference(D, _DTYPES[cfg.dtype])
+    dh, shift = _enhanced(arr, cfg, D)
+    if isinstance(D, np.ndarray) and np.may_share_memory(dh, D):
+        dh = dh.copy()  # never the caller's array
+    if shift:
+        dh -= dh.dtype.type(shift)
+    return dh
+
+
 def match(
     D: np.ndarray,
     config: MatcherConfig | None = None,
@@ -405,14 +495,7 @@ def match(
             raise DataError(f"db_limit values must lie in [0, {ndb}]")
         limit = limit.astype(np.int64)
 
-    if cfg.enhance_window > 0:
-        before, after = ((cfg.enhance_window // 2, cfg.enhance_window // 2)
-                         if cfg.enhance_mode == "centred" else (cfg.enhance_window, 0))
-        dh = arr if arr is not D else np.empty_like(arr)
-        _enhance_kernel(arr, dh, before, after)  # row-wise, safe in place
-    else:
-        dh = arr
-    shift = float(dh.min())
+    dh, shift = _enhanced(arr, cfg, D)
 
     offs = cfg.offsets()
     u_lo, _ = cfg.u_range()
@@ -426,11 +509,18 @@ def match(
     found = index >= 0
     if cfg.score == "min":
         score = best_s.copy()
-    else:
+    elif cfg.score == "ratio":
         score = np.full(nq, np.inf)
         ok = found & np.isfinite(second_s) & (second_s > 0)
         score[found] = 1.0
         score[ok] = best_s[ok] / second_s[ok]
+    else:
+        score, capped = _inverse_score(best_s, n_terms, found)
+        if cfg.capped_match is not None and capped.any():
+            if cfg.capped_match >= ndb:
+                raise ConfigError(f"capped_match={cfg.capped_match} is not a database frame "
+                                  f"(the database has {ndb})")
+            index[capped] = cfg.capped_match
     velocity = np.full(nq, np.nan)
     velocity[found] = cfg.velocities()[vel_i[found]]
     S = None
@@ -440,6 +530,19 @@ def match(
     return MatchResult(
         index=index, score=score, best_s=best_s, velocity=velocity, n_terms=n_terms,
         complete=n_terms == cfg.ds + 1, config=cfg, S=S)
+
+
+def _inverse_score(best_s: np.ndarray, n_terms: np.ndarray,
+                   found: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """score="inverse" (module doc, 6): (-min(1 / S_sum, 1), +inf without a match; which
+    queries were capped, i.e. 0 <= S_sum < 1)."""
+    total = np.where(found, best_s * n_terms, np.inf)
+    with np.errstate(divide="ignore"):
+        inv = 1.0 / total
+    capped = found & ((inv > 1.0) | (total == 0.0))
+    score = np.full(len(total), np.inf)
+    score[found] = -np.where(capped, 1.0, inv)[found]
+    return score, capped
 
 
 def seqslam(

@@ -31,6 +31,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
     "list": {
         "tasks": ("list_tasks", "list the registered benchmark tasks"),
         "methods": ("list_methods", "list the registered descriptor methods"),
+        "matchers": ("list_matchers", "list the matcher presets with every setting"),
     },
     "run": ("run", "run a method on benchmark tasks and store result records"),
     "train": ("train", "train a learned method (BiGAN, Stable-AFL) on the training sequences"),

@@ -56,38 +56,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sequence-matcher setting (safl_bench.matching.MatcherConfig), e.g. enhance_window=0 "
         "or ds=5; repeatable; recorded with every result (default: the paper's Table I)",
     )
+    parser.add_argument(
+        "--matcher-preset", default="paper", metavar="NAME",
+        help="named matcher settings, refined by --score and --matcher: paper (default: Table I, "
+        "Eq. 5-7), authors (the authors' public code), openseqslam; safl-bench list matchers",
+    )
+    # --score refines the preset only when given (the paper preset's score is "min", as before)
+    parser.set_defaults(score=None)
     add_parallel_arguments(parser, "build the views and evaluate the cells")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def matcher_config(score: str, items: list[str]) -> Any:
-    """The sequence matcher's settings: the paper's defaults, `--score`, then `--matcher` pairs."""
-    import dataclasses
+def matcher_config(score: str | None, items: list[str], preset: str = "paper") -> Any:
+    """The evaluation's matcher settings (an `EvaluationConfig`): the preset (default: the
+    paper's), then `--score` when given, then the `--matcher` pairs; an unknown preset or
+    setting is a ConfigError naming the valid ones."""
+    from safl_bench import matcher_presets
 
-    from safl_bench.errors import ConfigError
-    from safl_bench.matching import MatcherConfig
-
-    settings = {"score": score, **parse_key_values(items, "--matcher")}
-    valid = {f.name for f in dataclasses.fields(MatcherConfig)} - {"method"}
-    unknown = sorted(set(settings) - valid)
-    if unknown:
-        raise ConfigError(f"--matcher: unknown setting(s) {unknown}; valid: {sorted(valid)}")
-    return MatcherConfig(**settings)
+    changes = parse_key_values(items, "--matcher")
+    if score is not None:
+        changes = {"score": score, **changes}
+    return matcher_presets.configure(preset, changes, flag="--matcher")
 
 
 def main(args: argparse.Namespace) -> int:
     from safl_bench.errors import ConfigError
-    from safl_bench.evaluation import EvaluationConfig
-    from safl_bench.method_registry import make_method
+    from safl_bench.method_registry import make_method, method_class
     from safl_bench.records import default_results_dir
     from safl_bench.runner import RunOptions, resolve_tasks, run_grid, summary_table
+    from safl_bench.tasks import spec
 
     names = list(dict.fromkeys(args.method))
     if len(names) > 1 and (args.weights or args.param):
         raise ConfigError("--weights and --param apply to one method: give them with a single --method")
+    for name in names:
+        method_class(name)  # an unknown name fails before any work
     task_ids = resolve_tasks(args.task, source=source_kind(args))
-    methods = [make_method(name, weights=args.weights, **parse_key_values(args.param, "--param"))
-               for name in names]
+    params = parse_key_values(args.param, "--param")
+    # trainable methods take the weights trained on each task's kind of data (shipped ones differ
+    # between the synthetic default and real top views), so the grid runs per source
+    by_source: dict[str, list[str]] = {}
+    for task_id in task_ids:
+        by_source.setdefault(spec(task_id).source, []).append(task_id)
     seeds = list(dict.fromkeys(args.seed)) if args.seed else [None]
     options = RunOptions(
         results_dir=Path(args.results) if args.results else default_results_dir(),
@@ -96,11 +106,15 @@ def main(args: argparse.Namespace) -> int:
         kitti_root=args.kitti_root,
         bev_root=args.bev_root,
         bev_resolution_m=args.bev_resolution,
-        evaluation=EvaluationConfig(matcher_config(args.score, args.matcher)),
+        evaluation=matcher_config(args.score, args.matcher, args.matcher_preset),
         progress=not args.quiet,
     )
-    outcomes = run_grid(methods, task_ids, options, seeds=seeds, parallel=parallel_from(args))
-    print(f"{', '.join(f'{m.name}@{m.version}' for m in methods)} — records in {options.results_dir}")
+    parallel = parallel_from(args)
+    outcomes = []
+    for source, ids in by_source.items():
+        methods = [make_method(name, weights=args.weights, source=source, **params) for name in names]
+        outcomes += run_grid(methods, ids, options, seeds=seeds, parallel=parallel)
+    print(f"{', '.join(f'{n}@{method_class(n).version}' for n in names)} — records in {options.results_dir}")
     print(summary_table(outcomes))
     failed = [o for o in outcomes if o.status == "failed"]
     if failed:
