@@ -64,10 +64,10 @@ def main(args: argparse.Namespace) -> int:
 
         if args.bev_root is None:
             raise ConfigError("bench images needs --bev-root DIR (top-view image folders)")
-        results = source_bench.run(args.bev_root, args.sequence, repeats=args.repeats)
-        print(source_bench.format_results(results))
+        figures = source_bench.run(args.bev_root, args.sequence, repeats=args.repeats)
+        print(source_bench.format_results(figures))
         if args.json:
-            atomic_write_json(args.json, results)
+            atomic_write_json(args.json, figures)
         return 0
     if args.what == "matcher":
         from safl_bench import matching_bench
