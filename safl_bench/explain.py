@@ -1,0 +1,394 @@
+"""Why a cell scored what it did: one PNG of a result record's matrices, matches and mistakes.
+
+`explain` reads the record of one (method, task, seed) cell, rebuilds the method with the
+record's parameters and weights and the matcher with the record's settings (`EvaluationConfig
+.from_dict`), opens the task through the runner (`runner._task`, so every data-source option of
+`safl-bench run` applies), reads the cached views and recomputes only what a record does not
+hold: the descriptors, the difference matrix, the enhanced matrix and the matches. `draw` writes
+the figure:
+
+1. the difference matrix and the contrast-enhanced one side by side (the paper's Figure 4);
+2. the database frame each query was matched to against its true one, over the query index;
+3. each query's confidence, correct or wrong, with the most confident wrong match as a line:
+   recall at 100 % precision counts only the correct matches above it;
+4. the most confident wrong matches (`top`, default 4): the query's top view, the wrongly
+   matched database top view and the true database top view, side by side.
+
+A query's "true" database frame is its nearest true match (within the task's true-positive
+radius, among the frames it may match); a query without one has no true frame.
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.evaluation import (
+    EvaluationConfig,
+    difference_matrix,
+    score_matches,
+    scored_queries,
+    subset_result,
+    subset_truth,
+)
+from safl_bench.groundtruth import EXCLUDED, FP, TP
+from safl_bench.matching import MatchResult, enhanced_matrix, match
+from safl_bench.method import Method, method_input
+from safl_bench.metrics import Metrics
+from safl_bench.records import ResultRecord, default_results_dir, load_record, record_path
+
+#: Per-query outcome codes of `Explanation.status`.
+CORRECT, WRONG, BAND, NO_MATCH, NOT_SCORED = "correct", "wrong", "excluded band", "no match", "not scored"
+
+_SCORE_WORDS = {
+    "min": "-S, the negated lowest mean difference",
+    "ratio": "-S/S2, best S over the best elsewhere, negated",
+    "inverse": "min(1/S, 1), S the trajectory sum",
+}
+
+
+@dataclass
+class Explanation:
+    """Everything `draw` shows, for tests and for other figures."""
+
+    record: ResultRecord
+    record_path: Path
+    config: EvaluationConfig
+    D: np.ndarray  # (Nq, Ndb) the method's differences, lower = more similar
+    enhanced: np.ndarray  # (Nq, Ndb) what the sequence search reads (matching.enhanced_matrix)
+    result: MatchResult  # the sequence matcher's answers, every query
+    true_index: np.ndarray  # (Nq,) nearest true database frame, -1 where there is none
+    status: np.ndarray  # (Nq,) object: CORRECT, WRONG, BAND, NO_MATCH or NOT_SCORED
+    distance_m: np.ndarray  # (Nq,) metres between a query and its matched frame (inf: none)
+    tp_radius_m: float  # a match this close or closer is correct
+    metrics: Metrics  # recomputed from the matches, as the record's were
+    worst: list[int]  # the most confident wrong matches (query indices), most confident first
+    query_views: Any  # top views of the queries and of the database, for the figure
+    database_views: Any
+
+    @property
+    def confidence(self) -> np.ndarray:
+        return self.result.confidence
+
+    @property
+    def threshold(self) -> float | None:
+        """The confidence of the most confident wrong match (None: no wrong match)."""
+        return float(self.confidence[self.worst[0]]) if self.worst else None
+
+    @property
+    def recorded_recall(self) -> float | None:
+        return self.record.results["sequence"].metrics.recall_at_100_precision
+
+
+def run_command(method: str, task_id: str, *, seed: int | None = None,
+                results: str | Path | None = None, source_options: dict[str, Any] | None = None) -> str:
+    """The `safl-bench run` command that makes the record `explain` needs."""
+    words = ["safl-bench", "run", "--method", method, "--task", task_id]
+    if seed is not None:
+        words += ["--seed", str(seed)]
+    if results is not None:
+        words += ["--results", str(results)]
+    for flag, value in (source_options or {}).items():
+        if value is not None:
+            words += [flag, str(value)]
+    return " ".join(shlex.quote(w) for w in words)
+
+
+def rebuild_method(record: ResultRecord) -> Method:
+    """The method a record was made with: its parameters and the same weights (the shipped
+    ones, the untrained networks, or the same file). ConfigError when that is not possible."""
+    from safl_bench.method_registry import make_method
+    from safl_bench.runner import method_info
+
+    info = record.method.params
+    params = dict(info.get("params", {}))
+    weights_info = info.get("weights")
+    weights: str | None = None
+    source: str | None = None
+    if isinstance(weights_info, dict):
+        kind = weights_info.get("source")
+        if kind == "shipped":
+            weights, source = "shipped", weights_info.get("picked_for")
+        elif kind == "untrained":
+            weights = "untrained"
+        else:
+            weights = weights_info.get("path")
+    method = make_method(record.method.name, weights=weights, source=source, **params)
+    if method_info(method).params != info:
+        raise ConfigError(f"cannot rebuild {record.method.name} as its record has it (other "
+                          "weights or parameters here); rerun the cell with `safl-bench run --force`")
+    return method
+
+
+def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explanation:
+    """Recompute one cell from its record (see the module docstring). `options` is a
+    `runner.RunOptions` (results directory, seed, data-source options, progress); a cell
+    without a record is a DataError whose message is the run command that makes it."""
+    from safl_bench.method_registry import method_class
+    from safl_bench.runner import _task
+    from safl_bench.tasks import spec
+
+    registered = spec(task_id)
+    seed = registered.seed if options.seed is None else int(options.seed)
+    cls = method_class(method)
+    path = record_path(options.results_dir, cls.name, cls.version, registered.id, seed)
+    if not path.is_file():
+        given = None if options.results_dir == default_results_dir() else options.results_dir
+        command = run_command(cls.name, registered.id, seed=options.seed, results=given,
+                              source_options=_source_flags(options))
+        raise DataError(f"no record of {cls.name}@{cls.version} on {registered.id} seed {seed} in "
+                        f"{options.results_dir}; make it with: {command}")
+    record = load_record(path)
+    config = EvaluationConfig.from_dict(record.matcher)
+    described = rebuild_method(record)
+    task = _task(registered, seed, options, options.progress)
+    kind = described.input_kind
+    task.prepare(list(dict.fromkeys([kind, "topview"])))
+    queries, database, truth = task.queries(kind), task.database(kind), task.truth
+    q_top, db_top = task.queries("topview"), task.database("topview")
+    if config.max_frames is not None:
+        n = config.max_frames
+        queries, database, q_top, db_top = queries[:n], database[:n], q_top[:n], db_top[:n]
+        truth = subset_truth(truth, slice(0, n), slice(0, n))
+    D, _, _ = difference_matrix(described, method_input(described, queries),
+                                method_input(described, database))
+    limit = truth.db_limit() if task.spec.protocol == "revisit" else None
+    result = match(D, config.sequence, db_limit=limit)
+    enhanced = enhanced_matrix(D, config.sequence)
+
+    nq = len(D)
+    scored = scored_queries(nq, config.trim_queries)
+    part = subset_truth(truth, scored, slice(None)) if config.trim_queries else truth
+    metrics = score_matches(part, subset_result(result, scored))
+
+    claimed = result.index >= 0
+    label = np.zeros(nq, dtype=np.int8)
+    answered = np.flatnonzero(claimed)
+    label[answered] = truth.label_of(answered, result.index[answered])
+    status = np.full(nq, NOT_SCORED, dtype=object)
+    inside = np.zeros(nq, dtype=bool)
+    inside[scored] = True
+    status[inside & ~claimed] = NO_MATCH
+    status[inside & claimed & (label == TP)] = CORRECT
+    status[inside & claimed & (label == FP)] = WRONG
+    status[inside & claimed & (label == EXCLUDED)] = BAND
+    distance = np.full(nq, np.inf)
+    distance[answered] = truth.distances(answered, result.index[answered])
+    true_index = np.full(nq, -1, dtype=np.int64)
+    for i in range(nq):
+        near = truth.true_matches(i)
+        if len(near):
+            true_index[i] = int(near[np.argmin(truth.distances(i, near))])
+    wrong = np.flatnonzero(status == WRONG)
+    order = wrong[np.argsort(-result.confidence[wrong], kind="stable")]
+    return Explanation(record=record, record_path=path, config=config, D=D, enhanced=enhanced,
+                       result=result, true_index=true_index, status=status, distance_m=distance,
+                       tp_radius_m=float(truth.tp_radius),
+                       metrics=metrics, worst=[int(i) for i in order[:top]],
+                       query_views=q_top, database_views=db_top)
+
+
+def _source_flags(options: Any) -> dict[str, Any]:
+    """The data-source options of `options` as `safl-bench run` flags."""
+    flags = {"--kitti-root": getattr(options, "kitti_root", None),
+             "--bev-root": getattr(options, "bev_root", None)}
+    if getattr(options, "bev_root", None) is not None:
+        flags["--bev-resolution"] = getattr(options, "bev_resolution_m", None)
+    return flags
+
+
+def summary(ex: Explanation) -> str:
+    """A few lines for the terminal: the metric, and which wrong matches set it."""
+    from safl_bench.matcher_presets import label
+
+    rec = ex.record
+    lines = [f"{rec.method.name}@{rec.method.version} on {rec.task.id} seed {rec.seed}, matcher "
+             f"{label(ex.config)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)} "
+             f"(record: {_pct(ex.recorded_recall)}), {int((ex.status == CORRECT).sum())} of "
+             f"{int((ex.status != NOT_SCORED).sum())} scored queries matched correctly"]
+    if ex.threshold is not None:
+        above = int(((ex.status == CORRECT) & (ex.confidence > ex.threshold)).sum())
+        lines.append(f"the most confident wrong match outranks all but {above} correct ones:")
+        for rank, q in enumerate(ex.worst, 1):
+            lines.append(f"  #{rank} query {q} -> database {ex.result.index[q]} "
+                         f"({_metres(ex.distance_m[q])} away; true frame "
+                         f"{_frame(ex.true_index[q])}), confidence {ex.confidence[q]:.4g}")
+    return "\n".join(lines)
+
+
+def _pct(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.1f} %"
+
+
+def _metres(d: float) -> str:
+    return f"{d:.2f} m" if d < 100 else f"{d:.0f} m"
+
+
+def _frame(j: int) -> str:
+    return "none" if j < 0 else str(j)
+
+
+def _matrix_limits(a: np.ndarray) -> tuple[float, float]:
+    lo, hi = np.percentile(a, [1, 99])
+    return float(lo), float(hi if hi > lo else lo + 1.0)
+
+
+def draw(ex: Explanation, out: str | Path, *, dpi: int = 80) -> Path:
+    """Write the figure (module docstring) to `out` (PNG); returns the path."""
+    import matplotlib
+    import matplotlib.style
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from safl_bench.matcher_presets import label
+
+    out = Path(out)
+    rec, cfg = ex.record, ex.config.sequence
+    nq, ndb = ex.D.shape
+    n_rows = max(1, (len(ex.worst) + 1) // 2)
+    with matplotlib.style.context("default"):
+        fig = Figure(figsize=(16, 17 + 2.9 * n_rows), dpi=dpi)
+        FigureCanvasAgg(fig)
+        grid = fig.add_gridspec(4 + n_rows, 6, height_ratios=[6.2, 3.4, 3.4, 0.35] + [2.9] * n_rows,
+                                hspace=0.75, wspace=0.35, left=0.06, right=0.97, top=0.93, bottom=0.02)
+        fig.suptitle(
+            f"{rec.method.name}@{rec.method.version} on {rec.task.id} (seed {rec.seed}), matcher "
+            f"{label(ex.config)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)}, "
+            f"ROC AUC {_auc(ex.metrics)}\nrecord {ex.record_path}", fontsize=13)
+
+        # 1. the difference matrix and the enhanced one (paper Fig. 4)
+        if cfg.enhance_window:
+            how = (f"Eq. 5 over {cfg.enhance_window} database frames, {cfg.enhance_mode}"
+                   + ("; shifted to a minimum of 0" if cfg.shift else "; not shifted"))
+        else:
+            how = "no enhancement (enhance_window=0)" + ("; shifted to 0" if cfg.shift else "")
+        top_row = grid[0, :].subgridspec(1, 2, wspace=0.22)
+        for col, (matrix, title) in enumerate([
+                (ex.D, f"Difference matrix D ({rec.method.name}'s distance)"),
+                (ex.enhanced, f"Enhanced matrix: {how}")]):
+            ax = fig.add_subplot(top_row[0, col])
+            lo, hi = _matrix_limits(matrix)
+            image = ax.imshow(matrix, cmap="gray", vmin=lo, vmax=hi, aspect="auto",
+                              interpolation="nearest")
+            ax.set_title(title + "\ndarker = more similar", fontsize=11)
+            ax.set_xlabel("database frame")
+            ax.set_ylabel("query")
+            fig.colorbar(image, ax=ax, fraction=0.04, pad=0.02)
+
+        # 2. matched against true database frame
+        q = np.arange(nq)
+        ax = fig.add_subplot(grid[1, :])
+        has_true = ex.true_index >= 0
+        ax.plot(q[has_true], ex.true_index[has_true], "o", ms=5, mfc="none", color="0.55",
+                label="true database frame (nearest within the true-positive radius)")
+        for status, style, colour in ((CORRECT, ".", "tab:green"), (WRONG, "x", "tab:red"),
+                                      (BAND, "+", "tab:orange"), (NOT_SCORED, ".", "0.75")):
+            sel = (ex.status == status) & (ex.result.index >= 0)
+            if sel.any():
+                ax.plot(q[sel], ex.result.index[sel], style, ms=5, color=colour,
+                        label=f"matched: {status} ({int(sel.sum())})")
+        for rank, i in enumerate(ex.worst, 1):
+            ax.annotate(f"#{rank}", (i, ex.result.index[i]), textcoords="offset points",
+                        xytext=(4, 4), fontsize=10, color="tab:red", weight="bold")
+        _shade_unscored(ax, ex)
+        n_none = int((ex.status == NO_MATCH).sum())
+        ax.set_title("Database frame matched to each query by the sequence matcher, against the "
+                     "true one" + (f" ({n_none} scored queries got no match)" if n_none else ""),
+                     fontsize=11)
+        ax.set_xlabel("query")
+        ax.set_ylabel("database frame")
+        ax.set_xlim(-1, nq)
+        ax.set_ylim(-1, ndb)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize=9, ncol=4, frameon=False)
+
+        # 3. confidence per query
+        ax = fig.add_subplot(grid[2, :])
+        conf = ex.confidence
+        for status, style, colour in ((CORRECT, "o", "tab:green"), (WRONG, "x", "tab:red"),
+                                      (BAND, "+", "tab:orange"), (NOT_SCORED, ".", "0.75")):
+            sel = (ex.status == status) & np.isfinite(conf)
+            if sel.any():
+                ax.plot(q[sel], conf[sel], style, ms=4, color=colour,
+                        label=f"{status} ({int(sel.sum())})")
+        if ex.threshold is not None:
+            above = int(((ex.status == CORRECT) & (conf > ex.threshold)).sum())
+            ax.axhline(ex.threshold, color="tab:red", ls="--", lw=1,
+                       label=f"most confident wrong match: {above} correct matches above it "
+                             "count for recall at 100 % precision")
+            for rank, i in enumerate(ex.worst, 1):
+                ax.annotate(f"#{rank}", (i, conf[i]), textcoords="offset points", xytext=(4, 4),
+                            fontsize=10, color="tab:red", weight="bold")
+        _shade_unscored(ax, ex)
+        _shade_short(ax, ex)
+        ax.set_title(f"Confidence of each query's match (score={cfg.score}: "
+                     f"{_SCORE_WORDS.get(cfg.score, cfg.score)}); higher = accepted first",
+                     fontsize=11)
+        ax.set_xlabel("query")
+        ax.set_ylabel("confidence")
+        ax.set_xlim(-1, nq)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), fontsize=9, ncol=3, frameon=False)
+
+        # 4. the most confident wrong matches
+        head = fig.add_subplot(grid[3, :])
+        head.axis("off")
+        head.text(0.5, 0.0, "The most confident wrong matches (they set recall at 100 % "
+                  "precision): query top view, wrongly matched database top view, true database "
+                  "top view" if ex.worst else "No wrong match among the scored queries",
+                  ha="center", va="bottom", fontsize=12, transform=head.transAxes)
+        for rank, i in enumerate(ex.worst, 1):
+            row, col = 4 + (rank - 1) // 2, 3 * ((rank - 1) % 2)
+            j, t = int(ex.result.index[i]), int(ex.true_index[i])
+            short = ("" if ex.result.complete[i] else
+                     f"\nshortened trajectory: {ex.result.n_terms[i]} of {cfg.ds + 1} queries")
+            panels = [
+                (ex.query_views[i], f"#{rank} query {i}, confidence {conf[i]:.4g}{short}"),
+                (ex.database_views[j], f"matched: database {j}, wrong:\n{_metres(ex.distance_m[i])} away (> {ex.tp_radius_m:g} m)"),
+                (ex.database_views[t] if t >= 0 else None,
+                 f"true: database {t}" if t >= 0 else "no true database frame"),
+            ]
+            for k, (view, title) in enumerate(panels):
+                ax = fig.add_subplot(grid[row, col + k])
+                if view is not None:
+                    ax.imshow(np.asarray(view), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+                ax.set_title(title, fontsize=10, color="tab:red" if k == 1 else "black")
+                ax.set_xticks([])
+                ax.set_yticks([])
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, format="png")
+    return out
+
+
+def _auc(metrics: Metrics) -> str:
+    return "n/a" if metrics.roc_auc is None else f"{metrics.roc_auc:.3f}"
+
+
+def _shade_unscored(ax: Any, ex: Explanation) -> None:
+    """Grey bands over the queries `trim_queries` leaves out of the metrics."""
+    t, nq = ex.config.trim_queries, len(ex.status)
+    if t:
+        for k, (a, b) in enumerate(((-1, t - 0.5), (nq - t - 0.5, nq))):
+            ax.axvspan(a, b, color="0.9", zorder=0,
+                       label=f"left out of the metrics (trim_queries={t})" if k == 0 else None)
+
+
+def _shade_short(ax: Any, ex: Explanation) -> None:
+    """Yellow bands over the queries whose trajectory was shortened (edge_queries="shorten")."""
+    short = (ex.result.index >= 0) & ~ex.result.complete
+    if not short.any():
+        return
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], short.astype(np.int8), [0]])))
+    for k, (a, b) in enumerate(zip(edges[::2], edges[1::2], strict=True)):
+        ax.axvspan(a - 0.5, b - 0.5, color="gold", alpha=0.25, zorder=0,
+                   label="shortened trajectory (fewer than ds + 1 queries)" if k == 0 else None)
+
+
+def explain_to_png(method: str, task_id: str, options: Any, out: str | Path, *,
+                   top: int = 4) -> tuple[Explanation, Path]:
+    """`explain` then `draw`."""
+    ex = explain(method, task_id, options, top=top)
+    return ex, draw(ex, out)
