@@ -543,6 +543,8 @@ class BevPlace(Method):
     input_kind = "topview"
     #: Views are taken at the size they come in (the published images are 151 x 151).
     input_size: ClassVar[int | None] = None
+    #: `safl-bench bench methods` times it at the published images' size.
+    bench_view_size: ClassVar[int] = 151
     #: Runs the authors' published weights, shipped with the package; not trained here.
     ships_weights: ClassVar[bool] = True
     #: `fast` changes descriptors by < 1e-6 (tested < 1e-4), `batch_size` not at all.

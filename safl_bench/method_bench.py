@@ -4,7 +4,12 @@ For each method: milliseconds per frame at batch 1 (the robot's case), throughpu
 and for methods with their own distance the time of a KITTI-00-sized difference matrix
 (4541 x 4541 descriptors, drawn from the real ones with replacement). Views are those of a
 clean task (by default `SAFL/Synth00-T0R0-v0`, generated and cached on first use), so every
-method is timed on the input it declares (top-view maps or local-map points).
+method is timed on the input it declares (top-view maps or local-map points), resampled to its
+`input_size` as the runner does. A method whose cost depends on the view size and that is
+published for one size (class attribute `bench_view_size`, e.g. BEVPlace's 151 x 151 images) is
+timed on the views resampled to that size (timing does not depend on the content); the result
+says so (`views`). Slow methods are timed batched on a prefix of the views of about
+`batched_budget_s` seconds' work (estimated from the batch-1 figure), at least one batch.
 
     safl-bench bench methods --method stable_afl --method scan_context
 """
@@ -17,15 +22,31 @@ from typing import Any
 import numpy as np
 
 from safl_bench import timing
-from safl_bench.method import Method
+from safl_bench.method import Method, method_input
 from safl_bench.method_registry import list_methods, make_method
 
 DEFAULT_TASK = "SAFL/Synth00-T0R0-v0"
 MATRIX_N = 4541
+BATCHED_BUDGET_S = 10.0
 
 
 def _own_distance(method: Method) -> bool:
     return type(method).distance is not Method.distance
+
+
+def timing_views(method: Method, views: Any) -> tuple[Any, str | None]:
+    """The views `method` is timed on, and a note when they were resampled for it."""
+    views = method_input(method, views)
+    size = getattr(type(method), "bench_view_size", None)
+    if method.input_kind != "topview" or size is None:
+        return views, None
+    arr = np.asarray(views)
+    if arr.shape[1:] == (size, size):
+        return arr, None
+    from safl_bench.resample import fit_input
+
+    note = f"{arr.shape[1]}x{arr.shape[2]} views resampled to {size}x{size} for timing"
+    return fit_input(arr, size), note
 
 
 def bench_method(
@@ -36,10 +57,17 @@ def bench_method(
     batch_size: int = 64,
     repeats: int = 5,
     matrix_n: int | None = MATRIX_N,
+    batched_budget_s: float | None = BATCHED_BUDGET_S,
 ) -> dict[str, Any]:
     """All the figures of one method, JSON-ready."""
+    views, note = timing_views(method, views)
     batch1 = timing.time_describe(method, views, batch_size=1, frames=frames, repeats=repeats)
-    batched = timing.time_describe(method, views, batch_size=batch_size, frames=None,
+    batched_frames = None
+    if batched_budget_s is not None and batch1.median_s > 0:
+        per_frame_s = batch1.median_s / max(1, batch1.n_items)
+        affordable = max(batch_size, int(batched_budget_s / per_frame_s))
+        batched_frames = affordable if affordable < len(views) else None
+    batched = timing.time_describe(method, views, batch_size=batch_size, frames=batched_frames,
                                    repeats=max(1, repeats // 2))
     out: dict[str, Any] = {
         "method": method.name,
@@ -48,8 +76,10 @@ def bench_method(
         "batch1": batch1.to_dict(),
         "batched": batched.to_dict(),
     }
+    if note:
+        out["views"] = note
     if matrix_n:
-        desc = np.asarray(method.describe(views))
+        desc = np.asarray(method.describe(views[:batched.n_items]))
         pick = np.random.default_rng(0).integers(0, len(desc), matrix_n)
         big = np.ascontiguousarray(desc[pick])
         method.distance(big[:8], big[:8])  # compile / warm up
@@ -91,6 +121,9 @@ def format_results(results: Sequence[dict[str, Any]]) -> str:
         mat = f"{matrix['median_s']:.2f}" if matrix else "-"
         lines.append(f"{r['method']:14s} {r['input']:8s} {r['batch1']['per_item_ms']:15.2f} "
                      f"{r['batched']['extra']['frames_per_s']:19.0f} {mat:>15s}")
+    for r in results:
+        if r.get("views"):
+            lines.append(f"({r['method']}: {r['views']}; batched: {r['batched']['n_items']} frames)")
     env = results[0]["batch1"]["env"] if results else None
     if env:
         lines.append(f"({env['cpu_model']}, {env['usable_cpus']} CPUs, torch threads "

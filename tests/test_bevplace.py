@@ -3,6 +3,7 @@ invariance, input checks and the refusal of unsafe or ill-fitting checkpoints.""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,16 @@ from safl_bench.weights import file_sha256, load_tensors
 
 AUTHORS_TENSORS = 42
 AUTHORS_PARAMETERS = 456_904
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _one_thread() -> Iterator[None]:
+    """One torch thread here: the descriptors do not depend on it, and on a shared 2-core
+    machine two threads wait on each other (OpenMP) and run erratically slowly."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 @pytest.fixture(scope="module")
@@ -165,3 +176,15 @@ def test_transformed_copies_follow_the_authors_geometry() -> None:
     assert np.array_equal(taps.index[0], np.arange(151 * 151)) and np.all(taps.weight[0] == 1)
     half = bevplace.warp_taps(151, 7)
     assert half.weight[0].min() == 1 and half.index[0][1] == 2
+
+
+@pytest.mark.slow
+def test_bench_times_it_at_the_published_size(method: BevPlace) -> None:
+    from safl_bench import method_bench
+
+    views = sample_views("topview", n=4, size=64)
+    result = method_bench.bench_method(method, views, frames=1, repeats=1, batch_size=2,
+                                       matrix_n=None, batched_budget_s=0.01)
+    assert result["views"] == "64x64 views resampled to 151x151 for timing"
+    assert result["batch1"]["per_item_ms"] > 0 and result["batched"]["n_items"] == 2
+    assert "bevplace: 64x64 views resampled to 151x151" in method_bench.format_results([result])
