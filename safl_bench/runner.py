@@ -410,26 +410,32 @@ def _pct(value: float | None) -> str:
 
 
 def summary_table(outcomes: Sequence[CellOutcome]) -> str:
-    """A plain-text table of the headline figures per cell (sequence matching unless noted); a
-    method and a seed column only when the cells have more than one of them."""
+    """A plain-text table of the headline figures per cell: the matcher preset, then recall at
+    100 % precision beside the measures that do not collapse on one confident false positive
+    (F1max, Recall@1, AUC) of the sequence matcher, then single-frame matching; a method and a
+    seed column only when the cells have more than one of them."""
+    from safl_bench.matcher_presets import label
+
     by_method = len({o.method for o in outcomes}) > 1
     by_seed = len({o.seed for o in outcomes}) > 1
     lead = (("method",) if by_method else ()) + ("task",) + (("seed",) if by_seed else ())
-    header = (*lead, "R@100%P", "AUC", "F1max", "R@100%P 1-frame", "R@1 1-frame", "ms/frame",
-              "record")
+    header = (*lead, "matcher", "R@100%P", "F1max", "R@1", "AUC", "R@100%P 1-frame",
+              "R@1 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
     for o in outcomes:
         key = ((o.method,) if by_method else ()) + (o.task_id,) + ((str(o.seed),) if by_seed else ())
         if o.record is None:
-            rows.append((*key, "—", "—", "—", "—", "—", "—", f"failed: {o.message}"))
+            rows.append((*key, *["—"] * (len(header) - len(key) - 1), f"failed: {o.message}"))
             continue
         seq = o.record.results["sequence"].metrics
         single = o.record.results["single_frame"].metrics
         rows.append((
             *key,
+            label(o.record.matcher),
             _pct(seq.recall_at_100_precision),
+            "—" if seq.f1_max is None else f"{seq.f1_max:.3f}",
+            _pct(seq.recall_at_1),
             "—" if seq.auc is None else f"{seq.auc:.3f}",
-            f"{seq.f1_max:.3f}",
             _pct(single.recall_at_100_precision),
             _pct(single.recall_at_1),
             f"{o.record.timings.describe_ms_per_frame:.2f}",
@@ -439,4 +445,22 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
              for r in (header, *rows)]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines)
+    note = zeros_note(outcomes)
+    return "\n".join(lines + ([note] if note else []))
+
+
+def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
+    """One line when recall at 100 % precision is 0 in cells whose sequence matches are mostly
+    correct (Recall@1 >= 50 %): one confident false positive is enough for the zero, and
+    `safl-bench explain` shows which. '' when there is no such cell."""
+    cells = [o for o in outcomes if o.record is not None
+             and o.record.results["sequence"].metrics.recall_at_100_precision == 0.0
+             and (o.record.results["sequence"].metrics.recall_at_1 or 0.0) >= 0.5]
+    if not cells:
+        return ""
+    first = cells[0]
+    root = {"kitti": " --kitti-root DIR", "bev": " --bev-root DIR"}.get(
+        first.record.task.source_kind if first.record is not None else "", "")
+    return (f"note: recall at 100 % precision is 0.0 in {len(cells)} cell(s) whose matches are mostly "
+            "correct (R@1 >= 50 %): the most confident wrong match comes before any correct one; "
+            f"see which with `safl-bench explain --method {first.method} --task {first.task_id}{root}`")

@@ -183,3 +183,23 @@ def test_a_sequence_whose_views_cannot_be_rendered_fails_only_its_cells(kitti_co
             tasks.unregister(task_id)
     assert [o.status for o in out] == ["computed", "failed"]
     assert "000005.bin" in out[1].message and not out[1].path.exists()
+
+
+def test_summary_names_the_preset_and_explains_zeros_of_mostly_correct_cells(tmp_path):
+    from dataclasses import replace
+
+    from record_factory import make_record
+
+    from safl_bench.evaluation import EvaluationConfig
+
+    paper = EvaluationConfig().to_dict()
+    zero = replace(make_record("sad", recall=0.0, recall_at_1=0.9, source_kind="bev",
+                               source_label="KITTI top-view images"), matcher=paper)
+    fine = replace(make_record("sad", condition="T5R1", recall=0.5, recall_at_1=0.9), matcher=paper)
+    outcomes = [runner.CellOutcome(r.task.id, 0, "computed", tmp_path, r, method="sad") for r in (zero, fine)]
+    lines = runner.summary_table(outcomes).splitlines()
+    assert lines[0].split()[:6] == ["task", "matcher", "R@100%P", "F1max", "R@1", "AUC"]
+    assert lines[2].split()[:5] == [zero.task.id, "paper", "0.0", "0.700", "90.0"]
+    assert lines[-1].startswith("note: recall at 100 % precision is 0.0 in 1 cell(s) whose matches")
+    assert f"safl-bench explain --method sad --task {zero.task.id} --bev-root DIR" in lines[-1]
+    assert runner.zeros_note(outcomes[1:]) == ""
