@@ -4,15 +4,22 @@ The local map at frame f holds scans f-K+1..f (K = `MapConfig.window`); only sca
 requested frame needs are read. At each requested frame every requested condition's viewpoint
 (the robot pose moved by that condition's seeded offset) is rendered, for every requested kind,
 from the same map, so many conditions cost one pass over the scans.
+
+The "bev-density" encoding (BEVPlace's images, `safl_bench.bevdensity`) counts raw points, not
+local-map voxels: its top views are rendered from the raw points of the same window of scans
+(kept as read, with their poses), each viewpoint being the current scan's pose moved by the
+condition's offset; the local map is then only built when points views are requested.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 from tqdm import tqdm
 
+from safl_bench.bevdensity import density_views
 from safl_bench.errors import ConfigError
 from safl_bench.localmap import make_local_map
 from safl_bench.mapconfig import MapConfig
@@ -84,27 +91,42 @@ def build_views(
     for pos, f in enumerate(frames):
         at.setdefault(int(f), []).append(pos)
 
+    density = config.encoding == "bev-density"
+    use_map = not density or "points" in kinds
     local = make_local_map(config)
+    recent: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=k)  # bev-density: raw scans
     last = -2
     scans = np.flatnonzero(needed)
     for i in tqdm(scans, desc=f"maps {seq.name}", unit="scan", disable=not progress, leave=False):
-        if i != last + 1 and local.count:  # a gap longer than the window: start afresh
+        if i != last + 1 and (local.count or recent):  # a gap longer than the window: start afresh
             local = make_local_map(config)
+            recent.clear()
         last = int(i)
-        local.insert(seq.scan(int(i)), poses[i])
+        scan = seq.scan(int(i))
+        if use_map:
+            local.insert(scan, poses[i])
+        if density:
+            recent.append((scan[:, :3], poses[i]))
         if int(i) not in at:
             continue
-        centres = local.occupied()
         robot_z = float(poses[i][2, 3])
+        if use_map:
+            centres = local.occupied()
+        if not density:
+            xy, value = encode(centres, robot_z, config)
         base = pose_viewpoint(poses[i])
-        xy, value = encode(centres, robot_z, config)
         for pos in at[int(i)]:
             moves = [offsets[lb] for lb in labels]
             vps = np.stack(
                 [noisy_viewpoints(base, None if m is None else m[pos])[0] for m in moves]
             )
             if "topview" in kinds:
-                images = render(xy, value, vps, config)
+                if density:
+                    images = density_views(
+                        list(recent), poses[i], [None if m is None else m[pos] for m in moves], config
+                    )
+                else:
+                    images = render(xy, value, vps, config)
                 for j, lb in enumerate(labels):
                     tops[lb][pos] = images[j]
             if "points" in kinds:

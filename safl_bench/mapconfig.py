@@ -17,17 +17,45 @@ defaults below are ours and are documented here:
   obstacle voxel is 1.0, one holding only ground (observed, drivable) is `ground_value` (0.5),
   one with nothing is 0.0 (unknown). Encoding "height": obstacles are
   0.5 + 0.5 * min(height / max_height_m, 1), ground 0.25, unknown 0.
+- encoding "bev-density": BEVPlace's bird's-eye-view images (Luo et al., ICCV 2023), rendered
+  from the raw points of the last `window` scans rather than from the local map; the steps and
+  the evidence for each are in `safl_bench.bevdensity`. Use `bev_density_config()`, which sets
+  every field to BEVPlace's values; for this encoding some fields read differently:
+
+  - `size` 151 (odd sizes are allowed for this encoding only: the sensor pixel is the centre
+    pixel (size - 1) / 2), `extent_m` 60.4 (`cell_m` 0.4 m per pixel);
+  - `voxel_m` 0.3: the voxel grid whose occupied voxels are counted, aligned with the
+    viewpoint (also the local map's voxel, for the points views);
+  - `window` 1: BEVPlace renders single scans (its images of consecutive frames differ by what
+    one scan sees; nothing in its code or images suggests accumulation);
+  - `radius_m` 25: the half-width of a *square* crop, |x| < 25 m and |y| < 25 m in the
+    viewpoint frame, as BEVPlace's script crops (the published images have no pixel beyond
+    24.8 m of the sensor along either axis);
+  - `min_height_m` 0.53 and `max_height_m` 26.73: points are kept when their height above the
+    ground (z + `sensor_height_m`) is strictly between the two, i.e. sensor-frame
+    -1.2 m < z < 25 m: BEVPlace's |z| < 25 m and the ground cut at z = -1.2 m that its
+    published images show (the script does not);
+  - `ground_clearance_m`, `ground_value` and the occupancy probabilities do not change the
+    image (they still shape the local map of the points views).
+
+  The count clip (10) and the dropped counts (none: single counts are kept, as in the published
+  images) are the constants `bevdensity.DENSITY_CAP` and `bevdensity.DENSITY_MIN_COUNT`; their
+  values are part of the encoding, so changing either means a new encoding name.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 from safl_bench.errors import ConfigError
 
 BACKENDS = ("voxel", "octomap")
-ENCODINGS = ("occupancy", "height")
+ENCODINGS = ("occupancy", "height", "bev-density")
+#: BEVPlace's image geometry: 151 x 151 pixels of 0.4 m, the sensor at the centre pixel (75, 75).
+BEV_DENSITY_SIZE = 151
+BEV_DENSITY_CELL_M = 0.4
 
 
 def logodds(p: float) -> float:
@@ -62,7 +90,10 @@ class MapConfig:
             raise ConfigError(f"map backend must be one of {', '.join(BACKENDS)}, got {self.backend!r}")
         if self.encoding not in ENCODINGS:
             raise ConfigError(f"map encoding must be one of {', '.join(ENCODINGS)}, got {self.encoding!r}")
-        if not isinstance(self.size, int) or self.size < 2 or self.size % 2:
+        if self.encoding == "bev-density":
+            if not isinstance(self.size, int) or self.size < 2:
+                raise ConfigError(f"map size must be an integer >= 2, got {self.size!r}")
+        elif not isinstance(self.size, int) or self.size < 2 or self.size % 2:
             raise ConfigError(f"map size must be an even integer >= 2, got {self.size!r}")
         if not isinstance(self.window, int) or self.window < 1:
             raise ConfigError(f"map window must be an integer >= 1 scans, got {self.window!r}")
@@ -99,3 +130,28 @@ class MapConfig:
         exactly when the map is read.
         """
         return self.radius_m + 3.0 * self.window
+
+
+def bev_density_config(**changes: Any) -> MapConfig:
+    """BEVPlace's BEV-density encoding (module doc, `safl_bench.bevdensity`): 151 x 151 pixels
+    of 0.4 m, a single scan, 0.3 m voxels, a 25 m square crop, sensor-frame -1.2 m < z < 25 m;
+    `changes` override single fields (e.g. `window=3`, `backend="octomap"`)."""
+    base = MapConfig(
+        size=BEV_DENSITY_SIZE,
+        extent_m=BEV_DENSITY_SIZE * BEV_DENSITY_CELL_M,
+        voxel_m=0.3,
+        window=1,
+        radius_m=25.0,
+        encoding="bev-density",
+        min_height_m=0.53,
+        max_height_m=26.73,
+    )
+    return replace(base, **changes) if changes else base
+
+
+def config_for_encoding(encoding: str, **changes: Any) -> MapConfig:
+    """The map settings of an encoding: `bev_density_config()` for "bev-density" (its size,
+    voxel, window and crop come with it), the defaults otherwise; `changes` override fields."""
+    if encoding == "bev-density":
+        return bev_density_config(**changes)
+    return replace(MapConfig(), encoding=encoding, **changes)

@@ -16,6 +16,17 @@ the viewpoint before projection (`noisy_viewpoints`); finished images are never 
 Heights are measured above the ground under the robot (robot z - sensor_height_m); see
 `MapConfig` for the bands and the encodings. Several voxels falling in one pixel combine by max,
 so an obstacle anywhere in the pixel's column wins over ground.
+
+The "bev-density" encoding (BEVPlace's images) is not drawn from the local map's voxels but
+from the raw points of the window's scans, in `safl_bench.bevdensity`, with BEVPlace's own
+geometry, which differs from the above: an image of any size (151 x 151) whose centre pixel
+(c0, c0), c0 = (size - 1) / 2, holds the sensor, and row = c0 - trunc(x / cell),
+col = c0 - trunc(y / cell) (truncation toward zero, so the centre row and column are two cells
+wide). Forward is still up and left still left, so the same turns of the viewpoint turn the
+image the same way (left by 90 degrees: np.rot90(image, -1), exact for this geometry), and the
+viewpoint noise is applied the same way: by moving the viewpoint before rendering, never by
+warping the image. `scan_topview(points, bev_density_config())` is exactly BEVPlace's image of
+one scan (as PNG value / 255).
 """
 
 from __future__ import annotations
@@ -25,6 +36,7 @@ import math
 import numba
 import numpy as np
 
+from safl_bench.errors import ConfigError
 from safl_bench.mapconfig import MapConfig
 
 UNKNOWN = 0.0
@@ -57,7 +69,10 @@ def encode(centres: np.ndarray, robot_z: float, config: MapConfig) -> tuple[np.n
     """Pixel values of occupied voxels: (xy (K, 2) float64, value (K,) float32).
 
     Voxels below `min_height_m` or above `max_height_m` (above ground) are dropped.
+    The "bev-density" encoding has no per-voxel value (it counts; `safl_bench.bevdensity`).
     """
+    if config.encoding == "bev-density":
+        raise ConfigError("the bev-density encoding is rendered from points (safl_bench.bevdensity), not encoded per voxel")
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     h = centres[:, 2] - (robot_z - config.sensor_height_m)
     keep = (h >= config.min_height_m) & (h <= config.max_height_m)
@@ -132,11 +147,16 @@ def view_points(
 def scan_topview(points: np.ndarray, config: MapConfig | None = None) -> np.ndarray:
     """Top view (size, size) of one scan in its own sensor frame (no local map), for looking at.
 
-    Points are voxelised first, so the encoding matches the map-based views.
+    Points are voxelised first, so the encoding matches the map-based views. With the
+    "bev-density" encoding this is BEVPlace's image of the scan (`safl_bench.bevdensity`).
     """
     from safl_bench.localmap import keys_to_centres, voxel_keys
 
     config = config or MapConfig()
+    if config.encoding == "bev-density":
+        from safl_bench.bevdensity import density_image
+
+        return density_image(points, config)
     pts = np.asarray(points)[:, :3]
     pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= config.radius_m]
     centres = keys_to_centres(np.unique(voxel_keys(pts, config.voxel_m)), config.voxel_m)

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 from safl_bench.cli.options import add_parallel_arguments, parallel_from, seed
 from safl_bench.errors import ConfigError
 from safl_bench.mapbuild import DEFAULT_STEP, KINDS, select_frames
-from safl_bench.mapconfig import BACKENDS, ENCODINGS, MapConfig
+from safl_bench.mapconfig import BACKENDS, ENCODINGS, MapConfig, config_for_encoding
 from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition
 
 HELP = "build and cache the top-view maps of sequences (synthetic default or --kitti-root)"
@@ -25,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=BACKENDS, default=MapConfig.backend,
                         help="local-map backend (default: %(default)s)")
     parser.add_argument("--encoding", choices=ENCODINGS, default=MapConfig.encoding,
-                        help="top-view encoding (default: %(default)s)")
+                        help="top-view encoding (default: %(default)s); bev-density brings its own "
+                             "size, voxel, window and crop (BEVPlace's, mapconfig.bev_density_config)")
     parser.add_argument("--conditions", nargs="+", metavar="COND", default=["paper"],
                         help="'paper' (clean + the 12 conditions), 'clean', or names like T1R1 "
                              "(default: paper)")
@@ -57,7 +57,7 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError(f"--step must be >= 1, got {args.step}")
     conditions = parse_conditions(args.conditions)
     parallel = parallel_from(args)
-    config = replace(MapConfig(), backend=args.backend, encoding=args.encoding)
+    config = config_for_encoding(args.encoding, backend=args.backend)
     source = resolve_source(args.kitti_root, sequences=args.sequences, seed=args.seed,
                             progress=not args.quiet)
     sequences = args.sequences
