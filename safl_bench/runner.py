@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from safl_bench.errors import ConfigError, SaflError
-from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method
+from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method, same_settings
 from safl_bench.method import Method, input_note, method_input
 from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.records import (
@@ -105,7 +105,7 @@ def _same_run(method: MethodInfo, task: TaskInfo, matcher: dict[str, Any], want_
         return "method settings differ"
     if task.spec_fingerprint != task_fp:
         return "task definition differs"
-    if matcher != want_matcher:
+    if not same_settings(matcher, want_matcher):  # records older than a setting read it as default
         return "matcher settings differ"
     return ""
 

@@ -240,15 +240,18 @@ def _build(
 
 
 def _matcher_notes(records: list[ResultRecord]) -> list[str]:
+    from safl_bench.matcher_presets import label
+
     configs = sorted({json.dumps(r.matcher, sort_keys=True) for r in records})
+    labels = sorted({label(r.matcher) for r in records})
     if len(configs) == 1:
         settings = ", ".join(
             f"{k}={json.dumps(v)}" for k, v in sorted(json.loads(configs[0]).items())
         )
-        return [f"Matcher settings (all rows): {settings or 'defaults'}."]
+        return [f"Matcher preset (all rows): {labels[0]}; settings: {settings or 'defaults'}."]
     return [
-        f"Matcher settings differ between records ({len(configs)} configurations); "
-        "see all-results.csv before comparing rows."
+        f"Matcher settings differ between records ({len(configs)} configurations: "
+        f"{', '.join(labels)}); see all-results.csv before comparing rows."
     ]
 
 
@@ -455,6 +458,8 @@ def _label_modes(table: Table) -> Table:
 
 def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
     """Every record and matching mode as one row with all metrics and timings (long format)."""
+    from safl_bench.matcher_presets import label
+
     rows = []
     for r in sorted(records, key=lambda rec: rec.key):
         for mode in sorted(r.results, key=MODES.index):
@@ -486,6 +491,7 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                     "matcher_s": _num(r.timings.matcher_s, 3),
                     "peak_memory_mb": _num(r.timings.peak_memory_mb, 1),
                     "how_run": r.timings.how_run,
+                    "matcher_preset": label(r.matcher),
                     "matcher": json.dumps(r.matcher, sort_keys=True),
                     "cpu": r.environment.cpu_model,
                     "git_revision": r.environment.git_revision,
