@@ -27,6 +27,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
         "show": ("data_show", "draw a route, its revisits, scans and top-view maps to a PNG"),
         "prepare": ("data_prepare", "build and cache top-view maps (synthetic default or KITTI)"),
         "loops": ("data_loops", "export ground-truth loop pairs of a KITTI poses file as CSV"),
+        "export": ("data_export", "write a scan sequence's top views as images in BEVPlace's layout"),
     },
     "list": {
         "tasks": ("list_tasks", "list the registered benchmark tasks"),
