@@ -134,12 +134,25 @@ def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:
     return evaluate(result.confidence, labels == TP, truth.has_loop, valid=valid)
 
 
+def describe(method: Method, views: Any) -> tuple[np.ndarray, float]:
+    """(descriptors, seconds of describing them): through the descriptor cache for methods that
+    ask for it (`Method.cache_descriptors`; the seconds are then those measured when each view was
+    described), else directly."""
+    if getattr(method, "cache_descriptors", False) and method.input_kind == "topview":
+        from safl_bench.descriptor_cache import cached_describe
+
+        desc, per_frame, _ = cached_describe(method, views)
+        return desc, per_frame * len(desc)
+    t0 = time.perf_counter()
+    desc = method.describe(views)
+    return desc, time.perf_counter() - t0
+
+
 def difference_matrix(method: Method, queries: Any, database: Any) -> tuple[np.ndarray, float, int]:
     """Describe both sides and compare them; returns (D, seconds spent describing, frames)."""
-    t0 = time.perf_counter()
-    d_db = method.describe(database)
-    d_q = method.describe(queries)
-    describe_s = time.perf_counter() - t0
+    d_db, s_db = describe(method, database)
+    d_q, s_q = describe(method, queries)
+    describe_s = s_db + s_q
     n = len(d_db) + len(d_q)
     D = np.asarray(method.distance(d_q, d_db))
     if D.shape != (len(d_q), len(d_db)):

@@ -107,6 +107,9 @@ class Method:
     runtime_params: ClassVar[tuple[str, ...]] = ()
     #: Where the learned state came from (set by `load` / `make_method`); recorded in `config()`.
     weights_info: dict[str, Any] | None = None
+    #: True for methods slow enough that the harness keeps their descriptors on disk, keyed by
+    #: their configuration and each view (`safl_bench.descriptor_cache`).
+    cache_descriptors: ClassVar[bool] = False
 
     @property
     def input_size(self) -> int | None:

@@ -43,3 +43,22 @@ def test_views_are_described_once(safl_home) -> None:
     (next(cache_dir(method).glob("shard-*.npz"))).write_bytes(b"damaged")
     redone, _, _ = cached_describe(method, views)  # a damaged shard is a miss, not an error
     np.testing.assert_array_equal(redone, first)
+
+
+class Cached(Counting):
+    name = "counting_cached"
+    cache_descriptors = True
+
+
+def test_the_evaluation_reads_cached_descriptors_for_methods_that_ask(safl_home) -> None:
+    from safl_bench.evaluation import difference_matrix
+
+    views = np.random.default_rng(1).random((5, 8, 8)).astype(np.float32)
+    method = Cached()
+    D1, _, n = difference_matrix(method, views[:2], views)
+    D2, _, _ = difference_matrix(method, views[:2], views)
+    assert method.described == 5 and n == 7  # the queries are database views: described once
+    np.testing.assert_array_equal(D1, D2)
+    plain = Counting()
+    difference_matrix(plain, views[:2], views)
+    assert plain.described == 7  # no cache unless asked
