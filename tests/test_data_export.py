@@ -50,3 +50,17 @@ def test_export_bad_input(kitti_root: Path, safl_home: Path, tmp_path: Path,
     assert "no such sequence" in capsys.readouterr().err
     assert main([*base, "--step", "0"]) == 2
     assert "--step" in capsys.readouterr().err
+
+
+def test_show_compares_density_views_with_an_image_folder(kitti_root: Path, safl_home: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    bev = tmp_path / "bev"
+    assert main(["data", "export", "--kitti-root", str(kitti_root), "--out", str(bev), "--quiet"]) == 0
+    png = tmp_path / "show.png"
+    argv = ["data", "show", "--kitti-root", str(kitti_root), "--frames", "3", "9", "--bev-root", str(bev),
+            "--out", str(png)]
+    assert main(argv) == 0 and png.is_file()
+    out = capsys.readouterr().out
+    assert out.count("IoU 1.0000, equal pixels 100.0000%") == 2
+    assert main([*argv[:-2], "--frames", "12", "--out", str(png)]) == 2
+    assert "--frames" in capsys.readouterr().err
