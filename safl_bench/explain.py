@@ -146,7 +146,7 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     record = load_record(path)
     config = EvaluationConfig.from_dict(record.matcher)
     described = rebuild_method(record)
-    task = _task(registered, seed, options, options.progress)
+    task = _task(registered, seed, options, options.progress, described)
     kind = described.input_kind
     task.prepare(list(dict.fromkeys([kind, "topview"])))
     queries, database, truth = task.queries(kind), task.database(kind), task.truth

@@ -110,6 +110,9 @@ class Method:
     #: True for methods slow enough that the harness keeps their descriptors on disk, keyed by
     #: their configuration and each view (`safl_bench.descriptor_cache`).
     cache_descriptors: ClassVar[bool] = False
+    #: The top-view encoding the method reads on sources with scans (`MapConfig.encoding`, e.g.
+    #: "bev-density" for BEVPlace, whose network learned that image); None: the task's own maps.
+    view_encoding: ClassVar[str | None] = None
 
     @property
     def input_size(self) -> int | None:

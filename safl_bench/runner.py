@@ -151,8 +151,17 @@ def _existing(
     return seed, None
 
 
-def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool) -> Task:
+def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool,
+          method: Method | None = None) -> Task:
+    """The cell's task: the registered spec at the cell's seed, its views rendered in the
+    encoding `method` reads (`Method.view_encoding`, on sources with scans; an image source's
+    views are its images)."""
     run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
+    encoding = getattr(method, "view_encoding", None)
+    if encoding and run_spec.map_config is not None and run_spec.map_config.encoding != encoding:
+        from safl_bench.mapconfig import config_for_encoding
+
+        run_spec = dataclasses.replace(run_spec, map_config=config_for_encoding(encoding))
     return Task.from_spec(run_spec, kitti_root=options.kitti_root, bev_root=options.bev_root,
                           bev_resolution_m=options.bev_resolution_m, progress=progress)
 
@@ -162,7 +171,8 @@ def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunO
     """Render (or read) the views, describe, match and score one cell; no timing, no record.
     Runs in this process or on a worker (which gets the task's spec, not its id: tasks
     registered at run time exist only in this process)."""
-    return _evaluate(method, registered, _task(registered, seed, options, progress), options, where)
+    return _evaluate(method, registered, _task(registered, seed, options, progress, method), options,
+                     where)
 
 
 def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOptions,
@@ -179,6 +189,8 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
     note = input_note(method, database)
     if note is not None:
         extra["method_input"] = note
+    if task.spec.map_config != registered.map_config:  # rendered in the method's encoding
+        extra["views_map_config"] = task.spec.map_config
     return EvaluatedCell(
         method=method_info(method),
         task=task_info(
@@ -202,7 +214,7 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
     cell's evaluated file if a parallel run left one. `task`: the cell's task if this process
     already has it (its views are loaded), else it is opened again."""
     if task is None:
-        task = _task(spec(cell.task.id), cell.seed, options, progress=False)
+        task = _task(spec(cell.task.id), cell.seed, options, progress=False, method=method)
     queries = method_input(method, task.queries(method.input_kind))
     with pinned() as how_pinned:
         batch1 = time_describe(
@@ -248,7 +260,7 @@ def run_cell(
     if isinstance(existing, EvaluatedCell):  # an interrupted parallel run evaluated it
         return finish_cell(method, options, existing)
     registered = spec(task_id)
-    task = _task(registered, seed, options, options.progress)
+    task = _task(registered, seed, options, options.progress, method)
     return finish_cell(method, options, _evaluate(method, registered, task, options, "this process"), task)
 
 
@@ -392,7 +404,7 @@ def _prepare_views(
     for i, seed in todo.items():
         _, task_id, opts = cells[i]
         try:
-            tasks[i] = _task(spec(task_id), seed, opts, progress)
+            tasks[i] = _task(spec(task_id), seed, opts, progress, cells[i][0])
         except SaflError as exc:
             outcomes[i] = failed(i, str(exc))
     for kind in dict.fromkeys(cells[i][0].input_kind for i in tasks):

@@ -6,6 +6,7 @@ import json
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import write_kitti
 
@@ -203,3 +204,23 @@ def test_summary_names_the_preset_and_explains_zeros_of_mostly_correct_cells(tmp
     assert lines[-1].startswith("note: recall at 100 % precision is 0.0 in 1 cell(s) whose matches")
     assert f"safl-bench explain --method sad --task {zero.task.id} --bev-root DIR" in lines[-1]
     assert runner.zeros_note(outcomes[1:]) == ""
+
+
+def test_a_method_reads_views_in_its_own_encoding(tiny_tasks, kitti_root, tmp_path):
+    from safl_bench.method import Method, as_topview
+
+    class DensityShape(Method):
+        name = "density_shape"
+        version = "1"
+        view_encoding = "bev-density"
+
+        def describe(self, maps):  # type: ignore[no-untyped-def]
+            arr = as_topview(maps)
+            assert arr.shape[1:] == (151, 151)  # BEVPlace's images, not the 64x64 occupancy maps
+            return arr.reshape(len(arr), -1)[:, ::97].astype(np.float32)
+
+    out = runner.run_cell(DensityShape(), tiny_tasks[0], options(kitti_root, tmp_path))
+    assert out.status == "computed", out.message
+    spec = out.record.task.spec
+    assert spec["views_map_config"]["encoding"] == "bev-density"
+    assert out.record.task.spec_fingerprint == tasks.spec(tiny_tasks[0]).fingerprint  # same leaderboard cell
