@@ -335,3 +335,23 @@ def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
 def test_equal_values_are_not_bold() -> None:
     records = [make_record(m, condition="T1R1", recall=0.5) for m in ("a", "b")]
     assert "**" not in _table(records).markdown()
+
+
+def test_real_kitti_paper_tables_gain_one_table_by_matcher_preset(tmp_path) -> None:
+    from dataclasses import replace
+
+    from safl_bench.matcher_presets import configure
+
+    def record(preset: str, recall: float, condition: str) -> object:
+        base = make_record("sad", condition=condition, source_kind="bev",
+                           source_label="KITTI top-view images", recall=recall, recall_at_1=0.8)
+        return replace(base, matcher=configure(preset).to_dict())
+
+    paper = [record("paper", 0.0, c) for c in ("T1R1", "T5R1")]
+    authors = [record("authors", 0.4, c) for c in ("T1R1", "T5R1")]
+    build_leaderboard(paper, tmp_path / "lb", figures=False, preset_records=authors)
+    md = (tmp_path / "lb/tables/kitti-top-view-images/paper-00-v0-presets-recall.md").read_text()
+    rows = _rows(md)
+    assert rows[0] == "| Method | Version | Matcher | T1R1 | T5R1 |"
+    assert rows[1:] == ["| sad | 1 | authors | 40.0 | 40.0 |", "| sad | 1 | paper | 0.0 | 0.0 |"]
+    assert "Sequence matcher by preset" in (tmp_path / "lb/index.md").read_text()

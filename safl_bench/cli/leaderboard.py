@@ -1,8 +1,10 @@
 """`safl-bench leaderboard`: regenerate the leaderboard's tables and figures from result records.
 
-Defaults make the leaderboard directory self-contained: it holds its records (records/) and
-training logs (training-logs/) beside the generated tables and figures, so running the command
-at the root of a safl-bench checkout rebuilds the committed leaderboard exactly.
+Defaults make the leaderboard directory self-contained: it holds its records (records/), the
+records of the same tasks under other matcher presets (preset-records/<preset>/: a record's path
+does not name its preset) and training logs (training-logs/) beside the generated tables and
+figures, so running the command at the root of a safl-bench checkout rebuilds the committed
+leaderboard exactly.
 """
 
 from __future__ import annotations
@@ -64,6 +66,12 @@ def main(args: argparse.Namespace) -> int:
     results = Path(args.results) if args.results else out / "records"
     logs = Path(args.training_logs) if args.training_logs else out / "training-logs"
     records, problems = load_records(results)
+    presets_dir = out / "preset-records"
+    preset_records = []
+    for folder in sorted(p for p in presets_dir.iterdir() if p.is_dir()) if presets_dir.is_dir() else []:
+        found, bad = load_records(folder)
+        preset_records += found
+        problems += bad
     for problem in problems:
         print(f"safl-bench: warning: skipped record {problem}", file=sys.stderr)
     report = build_leaderboard(
@@ -73,6 +81,7 @@ def main(args: argparse.Namespace) -> int:
         skipped=problems,
         skipped_base=results,
         figures=not args.no_figures,
+        preset_records=preset_records,
     )
     for problem in report.problems:
         if problem not in problems:

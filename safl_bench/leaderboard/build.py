@@ -27,13 +27,14 @@ from pathlib import Path
 from safl_bench.atomic import atomic_write_text
 from safl_bench.errors import DataError
 from safl_bench.leaderboard import figures as figs
-from safl_bench.leaderboard.grouping import TableKey, group_records, slugify
+from safl_bench.leaderboard.grouping import TableKey, group_records, slugify, table_key
 from safl_bench.leaderboard.tables import (
     Table,
     all_results_frame,
     auc_table,
     bevplace_table,
     frame_csv,
+    preset_table,
     published_bevplace_markdown,
     recall_at_1_table,
     recall_table,
@@ -96,11 +97,14 @@ def build_leaderboard(
     skipped: Sequence[Problem] = (),
     skipped_base: str | os.PathLike[str] | None = None,
     figures: bool = True,
+    preset_records: Sequence[ResultRecord] = (),
 ) -> BuildReport:
     """Write the leaderboard for `records` into `out_dir` (see the module docstring).
 
     `skipped` lists record files the caller could not load; they are named in index.md
-    (relative to `skipped_base` when given). Raises DataError when there are no records, so an
+    (relative to `skipped_base` when given). `preset_records`: records of the same tasks made
+    with other matcher presets (kept in their own folders, since a record's path does not name
+    its preset); each paper-protocol table of the top-view images gains a table by preset. Raises DataError when there are no records, so an
     empty results directory never wipes a leaderboard.
     """
     if not records:
@@ -133,6 +137,18 @@ def build_leaderboard(
                 writer.text(f"tables/{base}-{stem}.csv", table.csv())
             if report.headline is None or _headline_rank(key) < _headline_rank(report.headline.key):
                 report.headline = recall
+            presets = [r for r in preset_records if table_key(r) == key]
+            if key.source_kind == "bev" and presets:
+                for metric, stem, title in (
+                    ("recall_at_100_precision", "presets-recall", "recall at 100 % precision (%)"),
+                    ("recall_at_1", "presets-recall-at-1", "Recall@1 (%)"),
+                ):
+                    by_preset = preset_table(key, [*group, *presets], metric=metric,
+                                             title=f"Sequence matcher by preset: {title}")
+                    md = by_preset.markdown(level=1)
+                    entry.tables.append((f"by matcher preset, {title}", writer.text(f"tables/{base}-{stem}.md", md)))
+                    writer.text(f"tables/{base}-{stem}.csv", by_preset.csv())
+                    entry.inline.append(by_preset.markdown(level=4))
             if figures:
                 entry.figures.append(
                     ("AUC heat map", writer.figure(heatmap, partial(figs.auc_heatmap, auc)))

@@ -321,6 +321,30 @@ def recall_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str
     )
 
 
+def preset_table(key: TableKey, records: list[ResultRecord], *, metric: str = "recall_at_100_precision",
+                 title: str = "Sequence matcher by preset: recall at 100 % precision (%)",
+                 notes: Iterable[str] = ()) -> Table:
+    """Rows = (method, version, matcher preset), columns = noise conditions, values = `metric` of
+    the sequence matcher: how much of a Table II cell comes from the matcher's variant. `records`
+    may hold several presets' records of one task (from separate results folders)."""
+    from safl_bench.matcher_presets import label
+
+    get = _metric(metric)
+    columns = condition_order(r.task.condition or "" for r in records)
+
+    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+        result = record.results.get("sequence")
+        if result is not None:
+            yield ((record.method.name, record.method.version, label(record.matcher)),
+                   record.task.condition or "", get(result.metrics))
+
+    table = _build(key, records, title=title, row_header=("Method", "Version", "Matcher"),
+                   columns=columns, formats=[RECALL_FORMAT] * len(columns), extract=extract, notes=notes)
+    table.notes = [n for n in table.notes if not n.startswith("Matcher settings differ")]
+    table.notes.append("Each preset's every setting: `safl-bench list matchers`.")
+    return table
+
+
 def recall_at_1_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
     """Recall@1 (%) per method and condition: the fraction of queries with a true place whose
     reported match is one (single-frame: the nearest database frame)."""
