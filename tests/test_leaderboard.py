@@ -353,5 +353,5 @@ def test_real_kitti_paper_tables_gain_one_table_by_matcher_preset(tmp_path) -> N
     md = (tmp_path / "lb/tables/kitti-top-view-images/paper-00-v0-presets-recall.md").read_text()
     rows = _rows(md)
     assert rows[0] == "| Method | Version | Matcher | T1R1 | T5R1 |"
-    assert rows[1:] == ["| sad | 1 | authors | 40.0 | 40.0 |", "| sad | 1 | paper | 0.0 | 0.0 |"]
+    assert rows[1:] == ["| sad | 1 | authors | 40.0 | 40.0 |", "| sad | 1 | paper | 0.0 | 0.0 |"]  # sorted by name
     assert "Sequence matcher by preset" in (tmp_path / "lb/index.md").read_text()

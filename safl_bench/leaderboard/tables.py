@@ -184,7 +184,7 @@ def _version_key(version: str) -> tuple[int, ...] | tuple[str]:
 
 def _row_sort_key(row: RowKey) -> tuple[object, ...]:
     mode_rank = MODES.index(row[2]) if row[2] in MODES else -1
-    return (row[0], _version_key(row[1]), row[1], mode_rank)
+    return (row[0], _version_key(row[1]), row[1], mode_rank, row[2])
 
 
 Extractor = Callable[[ResultRecord], Iterable[tuple[RowKey, str, float | None]]]
