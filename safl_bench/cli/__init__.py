@@ -28,6 +28,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
         "prepare": ("data_prepare", "build and cache top-view maps (synthetic default or KITTI)"),
         "loops": ("data_loops", "export ground-truth loop pairs of a KITTI poses file as CSV"),
         "export": ("data_export", "write a scan sequence's top views as images in BEVPlace's layout"),
+        "fidelity": ("data_fidelity", "compare the synthetic default with real top-view images: statistics, curves, rankings"),
     },
     "list": {
         "tasks": ("list_tasks", "list the registered benchmark tasks"),

@@ -1,0 +1,282 @@
+"""`safl-bench data fidelity`: the synthetic default against real KITTI, on BEVPlace's images.
+
+Renders a synthetic sequence (default 00) in the BEV-density encoding (BEVPlace's images of its
+scans, cached in the map cache), reads BEVPlace's images of the real sequences (`--bev-root`,
+default 00 and 02), and prints the statistics of `safl_bench.fidelity` side by side: image
+statistics, the difficulty curves of SAD and of the rotation-invariant polar descriptor against
+distance and heading difference, the envelope excess of the synthetic curves, and the
+place-recognition results of the top-view methods on the revisit protocol with Kendall's tau of
+their F1max ranking (records under --results, and --records, are reused; missing cells are run
+and written to --results, except BEVPlace's, about a second a frame on a CPU: run it first with
+`safl-bench run --method bevplace ...`). Writes a PNG of the curves (--out) and, with --json,
+the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from safl_bench.cli.options import seed
+from safl_bench.errors import DataError
+
+HELP = ("compare the synthetic default (rendered as BEVPlace's images) with real KITTI top-view "
+        "images: image statistics, difficulty curves, place-recognition ranking")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Flags of `data fidelity`."""
+    parser.add_argument("--bev-root", metavar="DIR", default=None,
+                        help="BEVPlace's image folders of real KITTI (data/KITTI; default $SAFL_BEV_ROOT)")
+    parser.add_argument("--sequences", nargs="+", metavar="XX", default=["00", "02"],
+                        help="real sequences to compare with (default: 00 02)")
+    parser.add_argument("--synth-sequence", metavar="XX", default="00",
+                        help="synthetic sequence (default 00, the default's test sequence)")
+    parser.add_argument("--seed", type=seed, default=0, help="synthetic seed (default 0)")
+    parser.add_argument("--synth-root", metavar="DIR", default=None,
+                        help="a KITTI-layout root to take as the synthetic side instead of the default "
+                             "(e.g. a changed generator's output); place recognition is then skipped")
+    parser.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1: all)")
+    parser.add_argument("--json", metavar="FILE", default=None, help="also write the numbers as JSON")
+    parser.add_argument("--out", metavar="PNG", default="fidelity.png", help="PNG of the curves (default %(default)s)")
+    parser.add_argument("--results", metavar="DIR", default=None,
+                        help="result records to reuse, and where missing cells are written "
+                             "(default $SAFL_RESULTS or ./results)")
+    parser.add_argument("--records", metavar="DIR", action="append", default=[],
+                        help="more record folders to read (never written), e.g. leaderboard/records")
+    parser.add_argument("--methods", nargs="+", metavar="NAME", default=None,
+                        help="top-view methods to rank (default: sad bigan stable_afl bevplace, those registered)")
+    parser.add_argument("--no-run", action="store_true", help="only read records; run no missing cell")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _real_root(arg: str | None) -> Path:
+    from safl_bench.sources.bev import BEV_ROOT_ENV
+
+    value = arg if arg is not None else os.environ.get(BEV_ROOT_ENV)
+    if not value:
+        raise DataError(
+            "data fidelity compares the synthetic default with real top-view images: pass --bev-root DIR "
+            f"(BEVPlace's data/KITTI, with sequences 00 02) or set {BEV_ROOT_ENV}"
+        )
+    return Path(value).expanduser()
+
+
+def _fmt(v: float | None, pct: bool = False, digits: int = 3) -> str:
+    if v is None:
+        return "n/a"
+    return f"{100 * v:.1f} %" if pct else f"{v:.{digits}f}"
+
+
+def _table(rows: list[list[str]]) -> str:
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths, strict=True)))
+             for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any], tasks: list[str]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 3, figsize=(16, 9))
+    for m in measured:
+        synth = m.label == synth_label
+        style = {"color": "k", "lw": 2.2} if synth else {"lw": 1.4}
+        st = m.stats
+        mids = (np.asarray(st.radial_edges_m[:-1]) + np.asarray(st.radial_edges_m[1:])) / 2
+        axes[0, 0].plot(mids, [np.nan if v is None else v for v in st.radial_profile], label=m.label, **style)
+        for col, name in ((1, "sad"), (2, "polar")):
+            c = m.distance[name]
+            x = (np.asarray(c.edges[:-1]) + np.asarray(c.edges[1:])) / 2
+            axes[0, col].plot(x, [np.nan if v is None else v for v in c.values], marker=".", label=m.label, **style)
+            h = m.heading[name]
+            x = (np.asarray(h.edges[:-1]) + np.asarray(h.edges[1:])) / 2
+            axes[1, col - 1].plot(x, [np.nan if v is None else v for v in h.values], marker="o", label=m.label, **style)
+    axes[0, 0].set(title="radial profile: mean value by distance", xlabel="m from the sensor", ylabel="mean value")
+    for col, name in ((1, "SAD (central 128 x 128)"), (2, "polar (20 x 60, shift-invariant)")):
+        axes[0, col].set(title=f"{name}: difference vs distance", xlabel="distance between frames (m)",
+                         ylabel="median difference / median beyond 100 m")
+        axes[0, col].axhline(1.0, color="grey", lw=0.6)
+        axes[1, col - 1].set(title=f"{name.split(' (')[0]}: vs heading difference, pairs within 3 m",
+                             xlabel="heading difference (deg)", ylabel="median difference / median beyond 100 m")
+    ax = axes[1, 2]
+    methods = sorted(pr)
+    width = 0.8 / max(1, len(tasks))
+    for k, task in enumerate(tasks):
+        vals = [np.nan if pr[m].get(task) is None or pr[m][task].f1_max is None else pr[m][task].f1_max
+                for m in methods]
+        ax.bar(np.arange(len(methods)) + k * width, vals, width, label=task.split("/")[-1])
+    ax.set_xticks(np.arange(len(methods)) + width * (len(tasks) - 1) / 2, methods)
+    ax.set(title="single-frame F1max, revisit protocol", ylim=(0, 1))
+    for a in axes.ravel():
+        a.legend(fontsize=7)
+    fig.tight_layout()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=80)
+    except OSError as exc:
+        raise DataError(f"cannot write {path}: {exc}") from exc
+    finally:
+        plt.close(fig)
+
+
+def main(args: argparse.Namespace) -> int:
+    from safl_bench import fidelity as F
+    from safl_bench import mapcache
+    from safl_bench.fingerprint import to_jsonable
+    from safl_bench.mapbuild import select_frames
+    from safl_bench.mapconfig import bev_density_config
+    from safl_bench.method_registry import list_methods
+    from safl_bench.noise import CLEAN
+    from safl_bench.records import default_results_dir
+    from safl_bench.sources import bev_source, synth_source
+    from safl_bench.tasks import spec
+    from safl_bench.tasks.builtin import revisit_id
+
+    started = time.perf_counter()
+    if args.step < 1:
+        raise DataError(f"--step must be >= 1, got {args.step}")
+    root = _real_root(args.bev_root)
+    real = bev_source(root)
+    for name in args.sequences:  # every requested sequence is there before any work
+        real.sequence(str(name))
+    progress = not args.quiet
+
+    config = bev_density_config()
+    if args.synth_root is not None:
+        from safl_bench.sources import kitti_source
+
+        synth: Any = kitti_source(args.synth_root)
+    else:
+        synth = synth_source(args.seed, [args.synth_sequence], progress=progress)
+    sseq = synth.sequence(args.synth_sequence)
+    frames = select_frames(len(sseq), args.step)
+    views = mapcache.load_views(synth, args.synth_sequence, config, frames=frames, condition=CLEAN,
+                                seed=0, progress=progress)
+    synth_label = f"synthetic {args.synth_sequence}" if args.synth_root is None else f"{args.synth_root} {args.synth_sequence}"
+    data = [F.SequenceImages(synth_label, np.asarray(views), sseq.positions[frames], sseq.headings[frames])]
+    for name in args.sequences:
+        seq = real.sequence(str(name))
+        images = real.images(str(name), progress=progress)
+        if images.shape[1] != config.size:
+            raise DataError(f"{seq.folder / 'imgs'}: images are {images.shape[1]}x{images.shape[1]}, "
+                            f"not BEVPlace's {config.size}x{config.size}")
+        data.append(F.SequenceImages(f"real {name}", images[::args.step], seq.positions[::args.step],
+                                     seq.headings[::args.step]))
+    measured = [F.measure(d, config.cell_m) for d in data]
+    del data, views
+    synth_m, real_m = measured[0], measured[1:]
+    excess = {name: F.envelope_excess(synth_m.distance[name], [m.distance[name] for m in real_m])
+              for name in F.DESCRIPTORS}
+    heading_excess = {name: F.envelope_excess(synth_m.heading[name], [m.heading[name] for m in real_m])
+                      for name in F.DESCRIPTORS}
+    curves_s = time.perf_counter() - started
+
+    registered = {m.name for m in list_methods()}
+    methods = [m for m in (args.methods or F.TOPVIEW_METHODS) if args.methods or m in registered]
+    synth_task = revisit_id("synth", args.synth_sequence)
+    real_tasks = [revisit_id("bev", str(s)) for s in args.sequences]
+    pr: dict[str, dict[str, F.MethodResult]] = {}
+    taus: dict[str, float | None] = {"mean": None}
+    if args.synth_root is None:
+        for task_id in [synth_task, *real_tasks]:
+            spec(task_id)  # one line naming an unregistered task (e.g. a real sequence without one)
+        results_dir = Path(args.results).expanduser() if args.results else default_results_dir()
+        pr = F.place_recognition(methods, synth_task, real_tasks, results_dir=results_dir,
+                                 extra_record_dirs=[Path(p).expanduser() for p in args.records],
+                                 bev_root=str(root), run=not args.no_run, progress=progress)
+        taus = F.ranking_tau(pr, synth_task, real_tasks)
+    runtime = time.perf_counter() - started
+
+    # -- the table ------------------------------------------------------------------------
+    labels = [m.label for m in real_m] + [synth_m.label]
+    order = [*real_m, synth_m]
+    rows = [["", *labels]]
+    rows.append(["frames", *[str(m.frames) for m in order]])
+    rows.append(["non-zero pixels", *[_fmt(m.stats.nonzero_fraction, pct=True) for m in order]])
+    rows.append(["mean non-zero value", *[_fmt(m.stats.mean_nonzero) for m in order]])
+    edges = synth_m.stats.radial_edges_m
+    for k in range(0, len(edges) - 1, 2):
+        rows.append([f"mean value at {edges[k]:g}-{edges[k + 1]:g} m",
+                     *[_fmt(m.stats.radial_profile[k], digits=4) for m in order]])
+    for name, title in (("sad", "SAD"), ("polar", "polar")):
+        c_edges = synth_m.distance[name].edges
+        for k in range(len(c_edges) - 1):
+            rows.append([f"{title} difference {c_edges[k]:g}-{c_edges[k + 1]:g} m",
+                         *[_fmt(m.distance[name].values[k]) for m in order]])
+        h_edges = synth_m.heading[name].edges
+        for k in range(len(h_edges) - 1):
+            rows.append([f"{title} at same place, turned {h_edges[k]:g}-{h_edges[k + 1]:g} deg",
+                         *[_fmt(m.heading[name].values[k]) + f" ({m.heading[name].counts[k]})" for m in order]])
+        rows.append([f"{title} median difference beyond 100 m", *[_fmt(m.distance[name].far_median, digits=4) for m in order]])
+    print(f"fidelity: {synth_m.label} (seed {args.seed}, BEV-density encoding) against BEVPlace's images of "
+          f"{', '.join(labels[:-1])} under {root}; every {args.step if args.step > 1 else ''}"
+          f"{'th ' if args.step > 1 else ''}frame")
+    print(_table(rows))
+    for name, title in (("sad", "SAD"), ("polar", "polar")):
+        value, kb = excess[name]
+        where = "" if kb is None else f" (worst at {synth_m.distance[name].edges[kb]:g}-{synth_m.distance[name].edges[kb + 1]:g} m)"
+        hv, hk = heading_excess[name]
+        hwhere = "" if hk is None else f" (worst at {synth_m.heading[name].edges[hk]:g}-{synth_m.heading[name].edges[hk + 1]:g} deg)"
+        print(f"{title} curve envelope excess: {value:.3f}{where}; against heading: {hv:.3f}{hwhere}")
+    print()
+    tasks = [*real_tasks, synth_task]
+    prow = [["method", *[f"{t.split('/')[-1]} R@1 / F1max" for t in tasks]]]
+    for m in sorted(pr):
+        cells = []
+        for t in tasks:
+            r = pr[m].get(t)
+            cells.append("n/a" if r is None or r.f1_max is None else f"{_fmt(r.recall_at_1)} / {_fmt(r.f1_max)}")
+        prow.append([m, *cells])
+    if pr:
+        print("place recognition, revisit protocol, single-frame matching (Recall@1 / F1max):")
+        print(_table(prow))
+    else:
+        print(f"place recognition skipped: {args.synth_root} is not the registered synthetic default")
+    notes = sorted({f"{r.method}: {r.note}" for per in pr.values() for r in per.values() if r.note})
+    for note in notes:
+        print(f"  note: {note}")
+    print("Kendall tau of F1max, synthetic vs " + ", ".join(
+        f"{t.split('/')[-1] if t != 'mean' else 'the real mean'} {_fmt(v)}" for t, v in taus.items()))
+    print(f"runtime {runtime:.1f} s (curves and statistics {curves_s:.1f} s)")
+
+    out = Path(args.out).expanduser()
+    _plot(out, measured, synth_label, pr, tasks)
+    print(f"wrote {out}")
+    if args.json:
+        report: dict[str, Any] = {
+            "curve_envelope_excess": excess["sad"][0],
+            "curve_envelope_excess_polar": excess["polar"][0],
+            "heading_envelope_excess": {n: heading_excess[n][0] for n in F.DESCRIPTORS},
+            "nonzero_fraction": {"real": {m.label.split()[-1]: m.stats.nonzero_fraction for m in real_m},
+                                 "synthetic": synth_m.stats.nonzero_fraction},
+            "mean_nonzero": {"real": {m.label.split()[-1]: m.stats.mean_nonzero for m in real_m},
+                             "synthetic": synth_m.stats.mean_nonzero},
+            "ranking_tau": taus.get("mean"),
+            "ranking_tau_per_sequence": {t: v for t, v in taus.items() if t != "mean"},
+            "place_recognition": {m: {t: to_jsonable(r) for t, r in per.items()} for m, per in pr.items()},
+            "sequences": {m.label: to_jsonable(m) for m in measured},
+            "synthetic": {"seed": args.seed, "sequence": args.synth_sequence, "root": str(synth.root),
+                          "map_config": to_jsonable(config)},
+            "real_root": str(root),
+            "step": args.step,
+            "runtime_s": runtime,
+        }
+        path = Path(args.json).expanduser()
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+        except OSError as exc:
+            raise DataError(f"cannot write {path}: {exc}") from exc
+        print(f"wrote {path}")
+    return 0

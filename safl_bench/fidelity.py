@@ -1,0 +1,420 @@
+"""How close the synthetic default is to real KITTI, measured on BEVPlace's top-view images.
+
+The real side is BEVPlace's published images of whole KITTI sequences (`--bev-root`); the
+synthetic side is a synthetic sequence rendered in the same encoding (`bev_density_config()`,
+which reproduces BEVPlace's images of real scans exactly; `safl_bench.bevdensity`). Both are
+compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
+
+- image statistics: the share of non-zero pixels, the mean non-zero value (in [0, 1]), and the
+  radial profile, the mean value of the pixels in 2 m rings around the sensor pixel;
+- difficulty curves: the median descriptor difference of two frames against the distance
+  between their positions (2 m bins, 0-40 m), divided by the median difference of the frame
+  pairs more than `FAR_M` (100 m) apart, so 1 means "as different as unrelated places". Every
+  pair of frames counts once, whatever their time apart (KITTI drives 0.85-1.15 m per frame,
+  the synthetic default 0.9: the near bins hold similar mixes of the same pass and revisits).
+  Two descriptors: SAD (`baselines.sad.SAD`, its defaults, on the central 128 x 128 pixels) and
+  a rotation-invariant polar descriptor, Scan Context's idea on the image: the maximum pixel
+  value in each of 20 rings (to 25 m, the images' crop) x 60 sectors, compared with Scan
+  Context's column-shift cosine distance (`baselines.scan_context.distance_matrix`). The same
+  medians against the heading difference of pairs at the same place (within `SAME_PLACE_M`,
+  3 m; 30 degree bins) show what turning does to each descriptor;
+- `envelope_excess`: how far, at its worst bin, a synthetic curve lies outside the min-max
+  envelope of the real sequences' curves (0 when inside everywhere); bins without pairs on
+  some side are skipped;
+- place recognition (`place_recognition`): Recall@1 and F1max of single-frame matching (the
+  descriptor's own nearest neighbour) of every top-view method on the revisit protocol, real
+  (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v0`, the
+  method's usual input on the default, the runner's choice), read from result records or run;
+  `ranking_tau` is Kendall's tau (scipy) between the methods' synthetic F1max and their mean
+  real F1max.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from safl_bench.errors import DataError
+
+SAD_CROP = 128
+DISTANCE_EDGES_M = tuple(float(v) for v in np.arange(0.0, 42.0, 2.0))
+FAR_M = 100.0
+SAME_PLACE_M = 3.0
+HEADING_EDGES_DEG = tuple(float(v) for v in np.arange(0.0, 181.0, 30.0))
+RADIAL_EDGES_M = tuple(float(v) for v in np.arange(0.0, 36.0, 2.0))
+POLAR_RINGS = 20
+POLAR_SECTORS = 60
+POLAR_RADIUS_M = 25.0
+DESCRIPTORS = ("sad", "polar")
+#: Methods compared in the ranking when registered (the top-view methods).
+TOPVIEW_METHODS = ("sad", "bigan", "stable_afl", "bevplace")
+#: Frames whose pairs farther than FAR_M give the normaliser (evenly spaced).
+FAR_SAMPLE = 500
+#: Query frames compared at once when collecting the near pairs.
+_ROWS = 128
+
+
+@dataclass
+class SequenceImages:
+    """One sequence's top views as 8-bit images (n, S, S) with positions (n, 2) and headings (n,)."""
+
+    label: str
+    images: np.ndarray
+    positions: np.ndarray
+    headings: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.images = as_levels(self.images)
+        self.positions = np.asarray(self.positions, dtype=np.float64).reshape(-1, 2)
+        self.headings = np.asarray(self.headings, dtype=np.float64).reshape(-1)
+        n = len(self.images)
+        if len(self.positions) != n or len(self.headings) != n:
+            raise DataError(f"{self.label}: {n} images, {len(self.positions)} positions, {len(self.headings)} headings")
+        if n < 2:
+            raise DataError(f"{self.label}: fidelity needs at least 2 frames, got {n}")
+
+
+def as_levels(images: np.ndarray) -> np.ndarray:
+    """8-bit images: uint8 as they are, float views in [0, 1] as rint(255 * value)."""
+    arr = np.asarray(images)
+    if arr.ndim != 3 or arr.shape[1] != arr.shape[2]:
+        raise DataError(f"expected square images (n, S, S), got shape {arr.shape}")
+    if arr.dtype == np.uint8:
+        return arr
+    return np.rint(np.clip(arr.astype(np.float32), 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+# -- image statistics -------------------------------------------------------------------------
+@dataclass
+class ImageStats:
+    """Statistics of a sequence's images (values in [0, 1])."""
+
+    nonzero_fraction: float
+    mean_nonzero: float
+    radial_edges_m: list[float]
+    radial_profile: list[float | None]
+
+
+def _radius_map(size: int, resolution_m: float) -> np.ndarray:
+    c0 = (size - 1) / 2.0
+    r, c = np.mgrid[0:size, 0:size]
+    return np.hypot(r - c0, c - c0) * resolution_m
+
+
+def image_stats(images: np.ndarray, resolution_m: float = 0.4, edges_m: Sequence[float] = RADIAL_EDGES_M) -> ImageStats:
+    """Non-zero share, mean non-zero value and radial profile (mean value per ring of `edges_m`
+    around the centre pixel) over all frames."""
+    levels = as_levels(images)
+    n, size, _ = levels.shape
+    total = np.zeros((size, size), np.float64)
+    nonzero = np.zeros((size, size), np.int64)
+    for lo in range(0, n, 256):  # bounded temporaries on long sequences
+        chunk = levels[lo:lo + 256]
+        total += chunk.sum(axis=0, dtype=np.float64)
+        nonzero += np.count_nonzero(chunk, axis=0)
+    n_nonzero = int(nonzero.sum())
+    mean_image = total / (255.0 * n)
+    ring = np.digitize(_radius_map(size, resolution_m), np.asarray(edges_m)) - 1
+    profile: list[float | None] = []
+    for k in range(len(edges_m) - 1):
+        inside = ring == k
+        profile.append(float(mean_image[inside].mean()) if inside.any() else None)
+    return ImageStats(
+        nonzero_fraction=n_nonzero / float(levels.size),
+        mean_nonzero=float(total.sum() / (255.0 * n_nonzero)) if n_nonzero else 0.0,
+        radial_edges_m=[float(e) for e in edges_m],
+        radial_profile=profile,
+    )
+
+
+# -- descriptors and their differences --------------------------------------------------------
+def central_crop(images: np.ndarray, size: int = SAD_CROP) -> np.ndarray:
+    """The central size x size pixels (all of a smaller image)."""
+    s = images.shape[-1]
+    if s <= size:
+        return images
+    lo = (s - size) // 2
+    return images[..., lo:lo + size, lo:lo + size]
+
+
+def polar_bins(size: int, resolution_m: float, rings: int = POLAR_RINGS, sectors: int = POLAR_SECTORS,
+               radius_m: float = POLAR_RADIUS_M) -> np.ndarray:
+    """Bin index ring * sectors + sector of every pixel (size, size), -1 beyond `radius_m`.
+    Sector 0 starts at forward (up) and sectors run counter-clockwise (towards the left), as in
+    Scan Context."""
+    c0 = (size - 1) / 2.0
+    r, c = np.mgrid[0:size, 0:size]
+    fwd, left = (c0 - r) * resolution_m, (c0 - c) * resolution_m
+    dist = np.hypot(fwd, left)
+    ring = np.minimum((dist / radius_m * rings).astype(np.int64), rings - 1)
+    sector = np.floor((np.arctan2(left, fwd) % (2 * np.pi)) / (2 * np.pi) * sectors).astype(np.int64) % sectors
+    return np.where(dist <= radius_m, ring * sectors + sector, -1)
+
+
+def polar_descriptors(images: np.ndarray, resolution_m: float = 0.4, rings: int = POLAR_RINGS,
+                      sectors: int = POLAR_SECTORS, radius_m: float = POLAR_RADIUS_M) -> np.ndarray:
+    """(n, rings, sectors) float32: the maximum value (in [0, 1]) of the pixels in each bin."""
+    levels = as_levels(images)
+    n, size, _ = levels.shape
+    bins = polar_bins(size, resolution_m, rings, sectors, radius_m).ravel()
+    order = np.argsort(bins, kind="stable")
+    order = order[bins[order] >= 0]
+    sorted_bins = bins[order]
+    starts = np.flatnonzero(np.r_[True, sorted_bins[1:] != sorted_bins[:-1]])
+    out = np.zeros((n, rings * sectors), np.float32)
+    flat = levels.reshape(n, -1)
+    for lo in range(0, n, 256):
+        chunk = flat[lo:lo + 256][:, order]
+        out[lo:lo + 256, sorted_bins[starts]] = np.maximum.reduceat(chunk, starts, axis=1) / np.float32(255.0)
+    return out.reshape(n, rings, sectors)
+
+
+def describe(images: np.ndarray, descriptor: str, resolution_m: float = 0.4) -> np.ndarray:
+    """Descriptors of 8-bit images: "sad" (SAD of the central 128 x 128 pixels, (n, 1024)) or
+    "polar" (`polar_descriptors`, (n, 20, 60))."""
+    levels = as_levels(images)
+    if descriptor == "sad":
+        from baselines.sad import SAD
+
+        return SAD().describe(central_crop(levels).astype(np.float32) / np.float32(255.0))
+    if descriptor == "polar":
+        return polar_descriptors(levels, resolution_m)
+    raise DataError(f"unknown descriptor {descriptor!r}; known: {', '.join(DESCRIPTORS)}")
+
+
+def differences(queries: np.ndarray, database: np.ndarray, descriptor: str) -> np.ndarray:
+    """(nq, nd) float32 differences of descriptors: SAD's mean absolute difference, or Scan
+    Context's rotation-invariant column-shift cosine distance for "polar"."""
+    if descriptor == "sad":
+        from baselines.sad import SAD
+
+        return np.asarray(SAD().distance(queries, database), dtype=np.float32)
+    if descriptor == "polar":
+        from baselines.scan_context import distance_matrix
+
+        return np.asarray(distance_matrix(queries, database), dtype=np.float32)
+    raise DataError(f"unknown descriptor {descriptor!r}; known: {', '.join(DESCRIPTORS)}")
+
+
+def difference_matrix(images: np.ndarray, descriptor: str, resolution_m: float = 0.4) -> np.ndarray:
+    """(n, n) float32 differences of every pair of frames under `descriptor`."""
+    desc = describe(images, descriptor, resolution_m)
+    return differences(desc, desc, descriptor)
+
+
+# -- curves -----------------------------------------------------------------------------------
+@dataclass
+class Curve:
+    """Median normalised difference per bin (None: no pairs), with the pair counts."""
+
+    edges: list[float]
+    values: list[float | None]
+    counts: list[int]
+    far_median: float | None
+
+
+def _wrap_deg(a: np.ndarray) -> np.ndarray:
+    return np.abs((np.degrees(a) + 180.0) % 360.0 - 180.0)
+
+
+def pair_curves(desc: np.ndarray, descriptor: str, positions: np.ndarray, headings: np.ndarray,
+                distance_edges_m: Sequence[float] = DISTANCE_EDGES_M, far_m: float = FAR_M,
+                same_place_m: float = SAME_PLACE_M,
+                heading_edges_deg: Sequence[float] = HEADING_EDGES_DEG,
+                far_sample: int = FAR_SAMPLE) -> tuple[Curve, Curve]:
+    """(distance curve, heading curve) over every pair of frames i < j (module doc).
+
+    Only the pairs the curves need are compared: those within the last distance edge (every
+    one of them), and for the normaliser the pairs farther than `far_m` among `far_sample`
+    evenly spaced frames (all frames when there are no more: exact on short sequences; on
+    KITTI 00 500 of 4541 frames, 58k of its 8.7M far pairs)."""
+    d_edges = np.asarray(distance_edges_m, dtype=np.float64)
+    h_edges = np.asarray(heading_edges_deg, dtype=np.float64)
+    pos = np.asarray(positions, dtype=np.float64)
+    head = np.asarray(headings, dtype=np.float64)
+    n = len(pos)
+    reach = max(float(d_edges[-1]), same_place_m)
+    near: list[list[np.ndarray]] = [[] for _ in range(len(d_edges) - 1)]
+    turn: list[list[np.ndarray]] = [[] for _ in range(len(h_edges) - 1)]
+    for lo in range(0, n, _ROWS):
+        hi = min(lo + _ROWS, n)
+        dist = np.hypot(pos[lo:hi, None, 0] - pos[None, :, 0], pos[lo:hi, None, 1] - pos[None, :, 1])
+        upper = np.arange(n)[None, :] > np.arange(lo, hi)[:, None]
+        wanted = upper & (dist <= reach)
+        cols = np.flatnonzero(wanted.any(axis=0))
+        if cols.size == 0:
+            continue
+        rows = np.flatnonzero(wanted.any(axis=1))
+        block = differences(desc[lo + rows], desc[cols], descriptor)
+        dist, upper = dist[np.ix_(rows, cols)], upper[np.ix_(rows, cols)]
+        k = np.digitize(dist, d_edges) - 1
+        ok = upper & (k >= 0) & (k < len(d_edges) - 1)
+        for b in np.unique(k[ok]):
+            near[b].append(block[ok & (k == b)])
+        same = upper & (dist <= same_place_m)
+        if same.any():
+            dh = _wrap_deg(head[lo + rows][:, None] - head[cols][None, :])
+            kh = np.clip(np.digitize(dh, h_edges) - 1, 0, len(h_edges) - 2)
+            for b in np.unique(kh[same]):
+                turn[b].append(block[same & (kh == b)])
+    sample = np.unique(np.linspace(0, n - 1, min(n, far_sample)).round().astype(np.int64))
+    d_far = np.hypot(*(pos[sample, None, :] - pos[None, sample, :]).transpose(2, 0, 1))
+    far_pairs = np.triu(d_far > far_m, 1)
+    far_vals = differences(desc[sample], desc[sample], descriptor)[far_pairs] if far_pairs.any() else np.zeros(0)
+    norm = float(np.median(far_vals)) if far_vals.size else None
+
+    def curve(edges: np.ndarray, groups: list[list[np.ndarray]]) -> Curve:
+        values: list[float | None] = []
+        counts: list[int] = []
+        for parts in groups:
+            vals = np.concatenate(parts) if parts else np.zeros(0, np.float32)
+            counts.append(int(vals.size))
+            values.append(float(np.median(vals)) / norm if vals.size and norm else None)
+        return Curve([float(e) for e in edges], values, counts, norm)
+
+    return curve(d_edges, near), curve(h_edges, turn)
+
+
+def envelope_excess(synthetic: Curve, real: Sequence[Curve]) -> tuple[float, int | None]:
+    """How far `synthetic` lies outside the min-max envelope of the `real` curves at its worst
+    bin (0 inside everywhere), and that bin (None when inside or no bin is comparable)."""
+    worst, where = 0.0, None
+    for k, value in enumerate(synthetic.values):
+        others = [c.values[k] for c in real]
+        if value is None or not others or any(o is None for o in others):
+            continue
+        lo = min(o for o in others if o is not None)
+        hi = max(o for o in others if o is not None)
+        excess = max(0.0, lo - value, value - hi)
+        if excess > worst:
+            worst, where = excess, k
+    return worst, where
+
+
+# -- one sequence, all statistics -------------------------------------------------------------
+@dataclass
+class SequenceFidelity:
+    """Everything measured on one sequence."""
+
+    label: str
+    frames: int
+    stats: ImageStats
+    distance: dict[str, Curve] = field(default_factory=dict)  # per descriptor
+    heading: dict[str, Curve] = field(default_factory=dict)
+
+
+def measure(seq: SequenceImages, resolution_m: float = 0.4,
+            descriptors: Sequence[str] = DESCRIPTORS) -> SequenceFidelity:
+    """Image statistics and both curves of every descriptor for one sequence."""
+    out = SequenceFidelity(seq.label, len(seq.images), image_stats(seq.images, resolution_m))
+    for name in descriptors:
+        desc = describe(seq.images, name, resolution_m)
+        out.distance[name], out.heading[name] = pair_curves(desc, name, seq.positions, seq.headings)
+    return out
+
+
+# -- place recognition ------------------------------------------------------------------------
+@dataclass
+class MethodResult:
+    """Single-frame Recall@1 and F1max of one method on one task (None: not available)."""
+
+    method: str
+    task_id: str
+    recall_at_1: float | None
+    f1_max: float | None
+    status: str  # "record", "computed", "missing" or "failed"
+    note: str = ""
+
+
+def _kendall(x: Sequence[float], y: Sequence[float]) -> float | None:
+    from scipy.stats import kendalltau
+
+    if len(x) < 2:
+        return None
+    tau = kendalltau(list(x), list(y)).statistic
+    return None if tau is None or not math.isfinite(float(tau)) else float(tau)
+
+
+def ranking_tau(results: dict[str, dict[str, MethodResult]], synthetic: str,
+                real: Sequence[str]) -> dict[str, float | None]:
+    """Kendall's tau of the methods' F1max: synthetic against each real task and against the mean
+    over the real tasks ("mean"), over the methods with a value on every task involved."""
+    out: dict[str, float | None] = {}
+    methods = sorted(results)
+
+    def f1(m: str, t: str) -> float | None:
+        r = results[m].get(t)
+        return None if r is None else r.f1_max
+
+    for task in [*real, "mean"]:
+        xs, ys = [], []
+        for m in methods:
+            s = f1(m, synthetic)
+            vals = [f1(m, t) for t in (real if task == "mean" else [task])]
+            if s is None or any(v is None for v in vals):
+                continue
+            xs.append(s)
+            ys.append(float(np.mean([v for v in vals if v is not None])))
+        out[task] = _kendall(xs, ys)
+    return out
+
+
+def place_recognition(
+    methods: Sequence[str], synthetic_task: str, real_tasks: Sequence[str], *, results_dir: Path,
+    extra_record_dirs: Sequence[Path] = (), bev_root: str | None = None, run: bool = True,
+    skip_run: Sequence[str] = ("bevplace",), progress: bool = False,
+) -> dict[str, dict[str, MethodResult]]:
+    """{method: {task: result}} from the records under `results_dir` (and `extra_record_dirs`),
+    running the missing cells with the runner (records written to `results_dir`) when `run`,
+    except for the methods in `skip_run` (too slow on a CPU: BEVPlace takes about a second a
+    frame here), which are only read."""
+    from safl_bench.method_registry import make_method
+    from safl_bench.records import load_records
+    from safl_bench.runner import RunOptions, run_grid
+    from safl_bench.tasks import spec
+
+    tasks = [synthetic_task, *real_tasks]
+    instances = {m: make_method(m) for m in methods}
+    by_key: dict[tuple[str, str, str, int], Any] = {}
+    for folder in [*extra_record_dirs, results_dir]:  # results_dir last: it wins
+        for record in load_records(folder)[0]:
+            by_key[record.key] = record
+
+    def from_record(m: str, t: str) -> MethodResult | None:
+        key = (m, instances[m].version, t, spec(t).seed)
+        record = by_key.get(key)
+        if record is None or "single_frame" not in record.results:
+            return None
+        metrics = record.results["single_frame"].metrics
+        return MethodResult(m, t, metrics.recall_at_1, metrics.f1_max, "record")
+
+    out: dict[str, dict[str, MethodResult]] = {m: {} for m in methods}
+    todo: dict[str, list[str]] = {}
+    for m in methods:
+        for t in tasks:
+            got = from_record(m, t)
+            if got is not None:
+                out[m][t] = got
+            elif run and m not in skip_run:
+                todo.setdefault(m, []).append(t)
+            else:
+                why = "no record (not run here: about 1 s a frame on a CPU)" if m in skip_run else "no record"
+                out[m][t] = MethodResult(m, t, None, None, "missing", why)
+    if todo:
+        options = RunOptions(results_dir=Path(results_dir), bev_root=bev_root, progress=progress)
+        for m, ts in todo.items():
+            for outcome in run_grid([instances[m]], ts, options, log=lambda _msg: None):
+                rec = outcome.record
+                if outcome.status == "failed" or rec is None:
+                    out[m][outcome.task_id] = MethodResult(m, outcome.task_id, None, None, "failed", outcome.message)
+                    continue
+                metrics = rec.results["single_frame"].metrics
+                out[m][outcome.task_id] = MethodResult(
+                    m, outcome.task_id, metrics.recall_at_1, metrics.f1_max,
+                    "computed" if outcome.status == "computed" else "record")
+    return out

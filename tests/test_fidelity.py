@@ -1,0 +1,143 @@
+"""Fidelity statistics on tiny hand-made data, and the `data fidelity` command's bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from safl_bench import fidelity as F
+from safl_bench.cli import main
+
+
+def _image(seed: int, size: int = 64, density: float = 0.1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.where(rng.random((size, size)) < density, rng.integers(1, 11, (size, size)) * 25.5, 0).astype(np.uint8)
+
+
+def test_image_stats_of_hand_made_images() -> None:
+    images = np.zeros((2, 5, 5), np.uint8)
+    images[0, 2, 2] = 255  # the centre pixel
+    images[1, 0, 2] = 51   # 2 pixels (0.8 m) ahead
+    st = F.image_stats(images, resolution_m=0.4, edges_m=(0.0, 0.5, 1.0))
+    assert st.nonzero_fraction == pytest.approx(2 / 50)
+    assert st.mean_nonzero == pytest.approx((1.0 + 0.2) / 2)
+    # the mean image: 0.5 at the centre, 0.1 at the pixel 0.8 m ahead; ring 0 (< 0.5 m) holds the
+    # centre and its 4 neighbours (0.4 m), ring 1 (0.5-1 m) 4 diagonals (0.57 m), 4 pixels at
+    # 0.8 m and 8 at 0.89 m
+    assert st.radial_profile[0] == pytest.approx(0.5 / 5)
+    assert st.radial_profile[1] == pytest.approx(0.1 / 16)
+
+
+def test_distance_and_heading_curves_of_hand_made_images() -> None:
+    a, b, c = _image(1), _image(2), _image(3)
+    a2 = a.copy()
+    a2[10:20, 10:20] = 255  # a changed view of place A
+    images = np.stack([a, a, b, b, c, a2])
+    positions = np.array([[0, 0], [1, 0], [150, 0], [151, 0], [300, 0], [5, 0]], float)
+    headings = np.radians([0, 100, 0, 0, 0, 0])
+    desc = F.describe(images, "sad")
+    curve, turn = F.pair_curves(desc, "sad", positions, headings)
+    d = F.differences(desc, desc, "sad")
+    far = [d[i, j] for i in range(6) for j in range(i + 1, 6) if abs(positions[i, 0] - positions[j, 0]) > 100]
+    assert len(far) == 11 and curve.far_median == pytest.approx(float(np.median(far)))
+    assert curve.values[0] == 0.0 and curve.counts[0] == 2  # identical images 1 m apart
+    assert curve.values[1] is None and curve.counts[1] == 0
+    assert curve.values[2] == pytest.approx(d[0, 5] / curve.far_median)  # A vs A' 4 and 5 m apart
+    assert curve.counts[2] == 2 and d[0, 5] > 0
+    # pairs within 3 m: (0, 1) turned 100 degrees, (2, 3) not turned
+    assert turn.counts == [1, 0, 0, 1, 0, 0] and turn.values[0] == turn.values[3] == 0.0
+
+
+def test_polar_descriptor_is_rotation_invariant_and_sad_is_not() -> None:
+    image = np.zeros((151, 151), np.uint8)
+    image[20:30, 60:70] = 255
+    image[90:95, 100:140] = 128
+    pair = np.stack([image, np.rot90(image, -1)])  # the viewpoint turned left by 90 degrees
+    polar = F.difference_matrix(pair, "polar")
+    sad = F.difference_matrix(pair, "sad")
+    assert polar[0, 1] < 0.05 and sad[0, 1] > 10 * polar[0, 1]
+    assert F.polar_descriptors(pair).shape == (2, F.POLAR_RINGS, F.POLAR_SECTORS)
+
+
+def test_envelope_excess() -> None:
+    def curve(values: list[float | None]) -> F.Curve:
+        return F.Curve([0.0, 2.0, 4.0, 6.0], values, [1] * len(values), 1.0)
+
+    real = [curve([0.3, 0.6, 0.9]), curve([0.5, 0.8, None])]
+    assert F.envelope_excess(curve([0.4, 0.7, 2.0]), real) == (0.0, None)  # inside; bin 2 not comparable
+    value, where = F.envelope_excess(curve([0.65, 0.5, 0.9]), real)
+    assert value == pytest.approx(0.15) and where == 0
+    value, where = F.envelope_excess(curve([0.4, 1.0, 0.9]), real)
+    assert value == pytest.approx(0.2) and where == 1
+
+
+def test_ranking_tau() -> None:
+    def res(m: str, t: str, f1: float | None) -> F.MethodResult:
+        return F.MethodResult(m, t, None, f1, "record")
+
+    f1 = {"a": (0.9, 0.8, 0.7), "b": (0.5, 0.4, 0.3), "c": (0.7, 0.9, 0.1), "d": (None, 0.2, 0.2)}
+    results = {m: {t: res(m, t, v) for t, v in zip(("S", "R1", "R2"), vals, strict=True)} for m, vals in f1.items()}
+    taus = F.ranking_tau(results, "S", ["R1", "R2"])
+    # d has no synthetic value and is left out; R1 orders a, b, c as c > a > b vs S a > c > b
+    assert taus["R1"] == pytest.approx(1 / 3)
+    assert taus["R2"] == pytest.approx(1 / 3)
+    assert taus["mean"] == pytest.approx(1.0)  # means 0.75, 0.35, 0.5: the same order as S
+
+
+def test_fidelity_cli_needs_real_data(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, bev_root: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.delenv("SAFL_BEV_ROOT", raising=False)
+    monkeypatch.setenv("SAFL_HOME", str(tmp_path / "home"))
+    assert main(["data", "fidelity", "--out", str(tmp_path / "f.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--bev-root" in err and "SAFL_BEV_ROOT" in err
+    assert main(["data", "fidelity", "--bev-root", str(tmp_path / "nowhere")]) == 2
+    assert "nowhere" in capsys.readouterr().err
+    assert main(["data", "fidelity", "--bev-root", str(bev_root), "--sequences", "00", "02"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(bev_root / "02") in err and "00" in err
+    assert not (tmp_path / "home").exists()  # nothing was generated before the check
+
+
+def test_fidelity_cli_end_to_end_on_tiny_data(kitti_root: Path, safl_home: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    # the "real" side: the tiny KITTI sequence exported as BEVPlace's images; the "synthetic"
+    # side: the same scans (--synth-root): every statistic agrees, the excess is 0
+    real = tmp_path / "real"
+    assert main(["data", "export", "--kitti-root", str(kitti_root), "--out", str(real), "--quiet"]) == 0
+    out, js = tmp_path / "f.png", tmp_path / "f.json"
+    argv = ["data", "fidelity", "--bev-root", str(real), "--sequences", "00", "--synth-root", str(kitti_root),
+            "--out", str(out), "--json", str(js), "--quiet"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "non-zero pixels" in text and "place recognition skipped" in text and out.is_file()
+    report = json.loads(js.read_text())
+    nz = report["nonzero_fraction"]
+    assert nz["real"]["00"] == pytest.approx(nz["synthetic"]) and nz["synthetic"] > 0
+    assert report["curve_envelope_excess"] == 0.0 and report["ranking_tau"] is None
+
+
+def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
+    from record_factory import make_record
+
+    from safl_bench.records import write_record
+
+    results, extra = tmp_path / "results", tmp_path / "committed"
+    f1 = {"sad": (0.9, 0.8, 0.5), "bigan": (0.95, 0.9, 0.7), "stable_afl": (0.97, 0.85, 0.72)}
+    for method, (s, r0, r2) in f1.items():
+        write_record(extra, make_record(method, protocol="revisit", condition=None, f1=s, recall_at_1=0.5))
+        for seq, v in (("00", r0), ("02", r2)):
+            write_record(results, make_record(method, protocol="revisit", condition=None, sequence=seq,
+                                              source_kind="bev", f1=v, recall_at_1=0.8))
+    tasks = ["SAFL/BEVKITTI00-Revisit-v0", "SAFL/BEVKITTI02-Revisit-v0"]
+    pr = F.place_recognition(["sad", "bigan", "stable_afl", "bevplace"], "SAFL/Synth00-Revisit-v0", tasks,
+                             results_dir=results, extra_record_dirs=[extra], run=False)
+    assert pr["sad"]["SAFL/BEVKITTI02-Revisit-v0"].f1_max == pytest.approx(0.25)  # single-frame: f1 * 0.5
+    assert pr["bigan"]["SAFL/Synth00-Revisit-v0"].recall_at_1 == pytest.approx(0.25)
+    assert pr["bevplace"]["SAFL/BEVKITTI00-Revisit-v0"].status == "missing"
+    taus = F.ranking_tau(pr, "SAFL/Synth00-Revisit-v0", tasks)
+    assert taus["SAFL/BEVKITTI02-Revisit-v0"] == pytest.approx(1.0)
+    assert taus["SAFL/BEVKITTI00-Revisit-v0"] == pytest.approx(1 / 3)
