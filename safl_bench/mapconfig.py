@@ -101,7 +101,10 @@ class MapConfig:
             value = getattr(self, label)
             if not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"{label} must be a finite value > 0, got {value!r}")
-        if not self.min_height_m < self.ground_clearance_m < self.max_height_m:
+        if self.encoding == "bev-density":  # no ground band: ground_clearance_m is not used
+            if not self.min_height_m < self.max_height_m:
+                raise ConfigError(f"need min_height_m < max_height_m, got {self.min_height_m}, {self.max_height_m}")
+        elif not self.min_height_m < self.ground_clearance_m < self.max_height_m:
             raise ConfigError(
                 "need min_height_m < ground_clearance_m < max_height_m, got "
                 f"{self.min_height_m}, {self.ground_clearance_m}, {self.max_height_m}"

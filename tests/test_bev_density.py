@@ -47,6 +47,9 @@ def test_config_is_bevplace() -> None:
     assert config_for_encoding("bev-density") == CFG
     assert config_for_encoding("height") == dataclasses.replace(MapConfig(), encoding="height")
     assert bev_density_config(window=3).window == 3
+    assert bev_density_config(min_height_m=0.7).min_height_m == 0.7  # no ground band to stay below
+    with pytest.raises(ConfigError, match="min_height_m < max_height_m"):
+        bev_density_config(min_height_m=30.0)
     with pytest.raises(ConfigError, match="even"):
         MapConfig(size=151)  # odd sizes only for the bev-density encoding
     with pytest.raises(ConfigError, match="rendered from points"):
