@@ -88,8 +88,10 @@ def method_input(method: Method, views: Any) -> Any:
 def input_note(method: Method, views: Any) -> str | None:
     """What `method_input` does to `views`, for records (None when it changes nothing)."""
     size = method.input_size if method.input_kind == "topview" else None
+    if size is None:  # any size, or point views (a list of arrays of different lengths)
+        return None
     shape = np.shape(views)[1:]
-    if size is None or shape == (size, size):
+    if shape == (size, size):
         return None
     return f"{shape[0]}x{shape[1]} views resampled to {size}x{size} (bilinear, antialiased)"
 

@@ -224,3 +224,8 @@ def test_a_method_reads_views_in_its_own_encoding(tiny_tasks, kitti_root, tmp_pa
     spec = out.record.task.spec
     assert spec["views_map_config"]["encoding"] == "bev-density"
     assert out.record.task.spec_fingerprint == tasks.spec(tiny_tasks[0]).fingerprint  # same leaderboard cell
+
+
+def test_a_point_cloud_method_runs_a_cell(tiny_tasks, kitti_root, tmp_path):
+    out = runner.run_cell(make_method("scan_context"), tiny_tasks[0], options(kitti_root, tmp_path))
+    assert out.status == "computed" and "method_input" not in out.record.task.spec
