@@ -222,7 +222,7 @@ def test_cli_workers_and_bad_values(grid, kitti_root, tmp_path, capsys):
     assert "computed" in capsys.readouterr().out
     assert main([*argv, "--seed", "0", "--seed", "3", "--workers", "2"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[1].split()[:2] == ["task", "seed"] and [ln.split()[-1] for ln in lines[3:]] == ["reused", "computed"]
+    assert lines[1].split()[:2] == ["task", "seed"] and [ln.split()[-1] for ln in lines[3:5]] == ["reused", "computed"]
     assert main([*argv, "--method", "bigan", "--param", "epochs=1"]) == 2
     assert "--param apply to one method" in capsys.readouterr().err
     assert main([*argv, "--workers", "0"]) == 2
