@@ -596,8 +596,11 @@ class BevPlace(Method):
     name = "bevplace"
     version = "1"
     input_kind = "topview"
-    #: Views are taken at the size they come in (the published images are 151 x 151).
-    input_size: ClassVar[int | None] = None
+    # Views are taken at the size they come in (`input_size` None; the published images are
+    # 151 x 151); on sources with scans they are rendered as BEVPlace's images (the network
+    # learned those), and at ~80 ms a frame its descriptors are kept on disk.
+    view_encoding: ClassVar[str | None] = "bev-density"
+    cache_descriptors: ClassVar[bool] = True
     #: `safl-bench bench methods` times it at the published images' size.
     bench_view_size: ClassVar[int] = 151
     #: Runs the authors' published weights, shipped with the package; not trained here.
