@@ -205,7 +205,7 @@ def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> Non
         "tables/all-results.csv",
         *(
             f"tables/{SRC}/paper-00-v0-{t}.{ext}"
-            for t in ("recall", "recall-at-1", "auc", "time")
+            for t in ("recall", "f1max", "recall-at-1", "auc", "time")
             for ext in ("md", "csv")
         ),
         f"tables/{SRC}/revisit-v0.md",
