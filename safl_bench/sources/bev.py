@@ -43,7 +43,7 @@ from safl_bench.atomic import atomic_path
 from safl_bench.errors import DataError
 from safl_bench.fingerprint import fingerprint
 from safl_bench.sources.base import DataSource, file_stat
-from safl_bench.sources.kitti import parse_numbers, read_lines, read_times
+from safl_bench.sources.kitti import read_pose_lines, read_times
 
 DEFAULT_RESOLUTION_M = 0.4
 #: Frame period assumed without `times.txt` (KITTI's LiDAR runs at 10 Hz).
@@ -78,16 +78,6 @@ class BevSequence:
         return np.arctan2(self.poses[:, 1, 0], self.poses[:, 0, 0])
 
 
-def _read_poses(path: Path, n: int, images: Path) -> np.ndarray:
-    lines = read_lines(path)
-    if len(lines) != n:
-        raise DataError(f"{path}: {len(lines)} pose lines for {n} images in {images}")
-    poses = np.tile(np.eye(4), (n, 1, 1))
-    for i, line in enumerate(lines):
-        poses[i, :3, :] = parse_numbers(path, i + 1, line, 12).reshape(3, 4)
-    return poses
-
-
 def open_bev_sequence(root: Path, name: str) -> BevSequence:
     """Open sequence `name` of a top-view image folder, checking every file cheaply (names,
     counts, poses, times; the images themselves are checked when decoded)."""
@@ -104,7 +94,7 @@ def open_bev_sequence(root: Path, name: str) -> BevSequence:
     pose_path = folder / "pose.txt"
     if not pose_path.is_file():
         raise DataError(f"{pose_path}: missing (the LiDAR pose of each frame, 12 numbers a line)")
-    poses = _read_poses(pose_path, len(files), imgs)
+    poses = read_pose_lines(pose_path, len(files), f"pose lines for {len(files)} images in {imgs}")
     times_path = folder / "times.txt"
     if times_path.is_file():
         times, assumed = read_times(times_path, len(files)), False

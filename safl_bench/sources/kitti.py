@@ -84,9 +84,15 @@ def read_times(path: Path, n: int) -> np.ndarray:
 
 def read_camera_poses(path: Path, n: int) -> np.ndarray:
     """Camera-0 poses (n, 4, 4) from `poses/XX.txt`, validated line by line."""
+    return read_pose_lines(path, n, f"poses for {n} scans (one pose per scan needed)")
+
+
+def read_pose_lines(path: Path, n: int, mismatch: str) -> np.ndarray:
+    """n poses (n, 4, 4) of 12 numbers a line (3x4 row-major), validated line by line; another
+    number of lines is a DataError "<path>: <count> <mismatch>"."""
     lines = read_lines(path)
     if len(lines) != n:
-        raise DataError(f"{path}: {len(lines)} poses for {n} scans (one pose per scan needed)")
+        raise DataError(f"{path}: {len(lines)} {mismatch}")
     poses = np.tile(np.eye(4), (n, 1, 1))
     for i, line in enumerate(lines):
         poses[i, :3, :] = parse_numbers(path, i + 1, line, 12).reshape(3, 4)
