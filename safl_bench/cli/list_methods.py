@@ -24,9 +24,9 @@ def main(args: argparse.Namespace) -> int:
     for info in infos:
         if info.error is not None:
             weights = "-"
-        elif info.cls is not None and info.cls.trainable:
-            path = shipped_weights_path(info.cls)
-            weights = str(path) if path else "none shipped"
+        elif info.cls is not None and (info.cls.trainable or getattr(info.cls, "ships_weights", False)):
+            shipped = [p for p in (shipped_weights_path(info.cls, s) for s in (None, "bev")) if p]
+            weights = ", ".join(dict.fromkeys(p.name for p in shipped)) or "none shipped"
         else:
             weights = "-"
         rows.append({
