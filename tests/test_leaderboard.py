@@ -316,7 +316,11 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
     if not records:
         pytest.skip("no committed records in leaderboard/records yet")
     assert problems == []
-    build_leaderboard(records, tmp_path, figures=False)
+    from safl_bench.cli.leaderboard import load_preset_records
+
+    presets, bad = load_preset_records(REPO_BOARD)
+    assert bad == []
+    build_leaderboard(records, tmp_path, figures=False, preset_records=presets)
     _committed(tmp_path, ("tables",))
 
 
@@ -325,8 +329,11 @@ def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
     records, problems = load_records(REPO_BOARD / "records")
     if not records:
         pytest.skip("no committed records in leaderboard/records yet")
+    from safl_bench.cli.leaderboard import load_preset_records
+
     build_leaderboard(
-        records, tmp_path, training_logs=REPO_BOARD / "training-logs", skipped=problems
+        records, tmp_path, training_logs=REPO_BOARD / "training-logs", skipped=problems,
+        preset_records=load_preset_records(REPO_BOARD)[0],
     )
     _committed(tmp_path, ("tables", "figures"))
     assert (tmp_path / "index.md").read_bytes() == (REPO_BOARD / "index.md").read_bytes()

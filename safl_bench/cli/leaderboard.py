@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from safl_bench.leaderboard import build_leaderboard
-from safl_bench.records import load_records
+from safl_bench.records import Problem, ResultRecord, load_records
 
 HELP = "regenerate the leaderboard (Markdown/CSV tables and PNG figures) from result records"
 
@@ -35,6 +35,18 @@ def _is_safl_bench(pyproject: Path) -> bool:
     except OSError:
         return False
     return 'name = "safl-bench"' in text
+
+
+def load_preset_records(out: Path) -> tuple[list[ResultRecord], list[Problem]]:
+    """The records under OUT/preset-records/<preset>/ (other matcher presets' runs)."""
+    folder = out / "preset-records"
+    records: list[ResultRecord] = []
+    problems: list[Problem] = []
+    for sub in sorted(p for p in folder.iterdir() if p.is_dir()) if folder.is_dir() else []:
+        found, bad = load_records(sub)
+        records += found
+        problems += bad
+    return records, problems
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -66,12 +78,8 @@ def main(args: argparse.Namespace) -> int:
     results = Path(args.results) if args.results else out / "records"
     logs = Path(args.training_logs) if args.training_logs else out / "training-logs"
     records, problems = load_records(results)
-    presets_dir = out / "preset-records"
-    preset_records = []
-    for folder in sorted(p for p in presets_dir.iterdir() if p.is_dir()) if presets_dir.is_dir() else []:
-        found, bad = load_records(folder)
-        preset_records += found
-        problems += bad
+    preset_records, bad = load_preset_records(out)
+    problems += bad
     for problem in problems:
         print(f"safl-bench: warning: skipped record {problem}", file=sys.stderr)
     report = build_leaderboard(
