@@ -78,8 +78,17 @@ def test_time_matcher_and_memory() -> None:
 
 def test_measure_peak_sees_a_large_allocation() -> None:
     def alloc() -> float:
-        a = np.ones(64 * 1024 * 1024 // 8)  # 64 MB, touched
-        return float(a.sum())
+        # 64 MB of fresh anonymous pages, touched: memory the allocator cannot hand back from
+        # pages an earlier test left resident (in the full suite np.ones could reuse them)
+        import mmap
+
+        block = mmap.mmap(-1, 64 * 1024 * 1024)
+        a = np.frombuffer(block, dtype=np.float64)
+        a[:] = 1.0
+        total = float(a.sum())
+        del a
+        block.close()
+        return total
 
     value, mem = timing.measure_peak(alloc)
     assert value == 64 * 1024 * 1024 // 8
