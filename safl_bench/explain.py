@@ -131,9 +131,9 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     without a record is a DataError whose message is the run command that makes it."""
     from safl_bench.method_registry import method_class
     from safl_bench.runner import _task
-    from safl_bench.tasks import spec
+    from safl_bench.tasks.registry import runnable_spec
 
-    registered = spec(task_id)
+    registered = runnable_spec(task_id)  # an old synthetic task cannot be recomputed
     seed = registered.seed if options.seed is None else int(options.seed)
     cls = method_class(method)
     path = record_path(options.results_dir, cls.name, cls.version, registered.id, seed)

@@ -43,6 +43,7 @@ from safl_bench.records import (
     write_record,
 )
 from safl_bench.tasks import registry, spec, suite
+from safl_bench.tasks.registry import runnable_spec
 from safl_bench.tasks.spec import TaskSpec
 from safl_bench.tasks.task import Task, prepare_tasks
 from safl_bench.timing import pinned, time_describe
@@ -82,11 +83,12 @@ def resolve_tasks(items: Sequence[str], *, source: str = "synth") -> list[str]:
 
     Suites pick the tasks on `source` ("synth", the embedded default; "kitti"; "bev", top-view
     images); the 'bev-...' suites are top-view image tasks whatever `source`. No items means the
-    'paper' suite.
+    'paper' suite. A synthetic task on other synthetic data than this safl-bench generates (the
+    synthetic tasks' v0) is a ConfigError naming the version to run (`check_data_version`).
     """
     out: list[str] = []
     for item in items or ["paper"]:
-        ids = [spec(item).id] if "/" in item or item in registry else suite(item, source)
+        ids = [runnable_spec(item).id] if "/" in item or item in registry else suite(item, source)
         out.extend(i for i in ids if i not in out)
     return out
 
@@ -120,7 +122,7 @@ def _existing(
 ) -> tuple[int, CellOutcome | EvaluatedCell | None]:
     """(seed, what already exists of the cell): its reusable record as an outcome, or the
     evaluation an interrupted parallel run left untimed, or None when it must be computed."""
-    registered = spec(task_id)
+    registered = runnable_spec(task_id)  # an old synthetic task's record is not reused either
     seed = _seed(registered, options)
     info = method_info(method)
     path = record_path(options.results_dir, info.name, info.version, registered.id, seed)

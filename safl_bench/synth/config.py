@@ -13,8 +13,10 @@ import numpy as np
 
 from safl_bench.errors import ConfigError
 
-#: Bumped whenever the generator's output changes for the same seed and config.
-GENERATOR_VERSION = "1"
+#: Bumped whenever the generator's output changes for the same seed and config. Version "1" was
+#: the data of the synthetic tasks' task version v0 (e.g. SAFL/Synth00-T1R1-v0); version "2" is
+#: that of v1. A bump needs new synthetic task versions in `safl_bench.tasks.builtin`.
+GENERATOR_VERSION = "2"
 
 DEFAULT_SEED = 0
 #: Test sequences, in the roles of KITTI 00 and 09.

@@ -1,7 +1,7 @@
 """The built-in tasks and the named suites.
 
 Paper protocol (Table II): the twelve conditions T{1,5,10,20}R{1,1.5,2} on the test sequences 00
-and 09, for the embedded synthetic default (`SAFL/Synth00-T1R1-v0`) and for KITTI
+and 09, for the embedded synthetic default (`SAFL/Synth00-T1R1-v1`) and for KITTI
 (`SAFL/KITTI00-T1R1-v0`); every 4th frame, as the authors' public code did (the paper is silent),
 true positive within 10 m, noise seed 0. A clean T0R0 sanity task per sequence checks that a
 method finds the route without noise.
@@ -19,6 +19,11 @@ within 5 m, scored by Recall@1); and the paper's twelve conditions on 00, whose 
 are the images resampled to the moved viewpoint (there are no points to re-render: nearest
 neighbour, what comes from outside the image is empty; at T20 up to a third of a 60.4 m wide
 view along the shift, see `safl_bench.resample`).
+
+Synthetic tasks are at task version v1, on synthetic data version "2" (`SYNTH_DATA_VERSIONS`);
+their v0, on data version "1", stays registered so that its records resolve, but in no suite,
+and it cannot be run (this safl-bench generates version "2" only). KITTI and top-view image
+tasks are at v0.
 
 Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
 """
@@ -68,30 +73,54 @@ SUITES = {
 SOURCE_SUITES = {"bev-revisit": "bev", "bev-bevplace": "bev", "bev-paper": "bev"}
 
 _BUILTIN: dict[str, list[str]] = {name: [] for name in SUITES}
+#: Built-in tasks of older versions: registered (their records resolve), in no suite.
+_SUPERSEDED: list[str] = []
+
+#: The current version of the built-in tasks per source: the one the suites hold.
+TASK_VERSION = {"synth": 1, "kitti": 0, "bev": 0}
+#: Task version of the synthetic tasks -> the synthetic data version it is defined on
+#: (`synth.GENERATOR_VERSION`); the versions before `TASK_VERSION["synth"]` are superseded.
+SYNTH_DATA_VERSIONS = {0: "1", 1: "2"}
 
 
-def paper_id(source: str, sequence: str, condition: Condition, version: int = 0) -> str:
-    """Id of a paper-protocol task, e.g. SAFL/KITTI00-T5R1.5-v0."""
-    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-{condition.name}-v{version}"
+def _version(source: str, version: int | None) -> int:
+    return TASK_VERSION[source] if version is None else version
 
 
-def revisit_id(source: str, sequence: str, version: int = 0) -> str:
-    """Id of a revisit-protocol task, e.g. SAFL/KITTI08-Revisit-v0."""
-    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-Revisit-v{version}"
+def paper_id(source: str, sequence: str, condition: Condition, version: int | None = None) -> str:
+    """Id of a paper-protocol task, e.g. SAFL/KITTI00-T5R1.5-v0 (`version`: default the
+    source's current one, `TASK_VERSION`)."""
+    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-{condition.name}-v{_version(source, version)}"
 
 
-def bevplace_id(source: str, sequence: str, version: int = 0) -> str:
-    """Id of a BEVPlace-protocol task, e.g. SAFL/BEVKITTI02-BEVPlace-v0."""
-    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-BEVPlace-v{version}"
+def revisit_id(source: str, sequence: str, version: int | None = None) -> str:
+    """Id of a revisit-protocol task, e.g. SAFL/KITTI08-Revisit-v0 (default: current version)."""
+    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-Revisit-v{_version(source, version)}"
 
 
-def _paper(source: str, sequence: str, condition: Condition) -> TaskSpec:
+def bevplace_id(source: str, sequence: str, version: int | None = None) -> str:
+    """Id of a BEVPlace-protocol task, e.g. SAFL/BEVKITTI02-BEVPlace-v0 (default: current version)."""
+    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-BEVPlace-v{_version(source, version)}"
+
+
+def _data_version(source: str, version: int | None) -> str | None:
+    """The synthetic data version of a built-in task (None off the synthetic source)."""
+    return SYNTH_DATA_VERSIONS[_version(source, version)] if source == "synth" else None
+
+
+def _superseded_note(source: str, version: int | None) -> str:
+    if _version(source, version) == TASK_VERSION[source]:
+        return ""
+    return f" (superseded: defined on synthetic data version {_data_version(source, version)})"
+
+
+def _paper(source: str, sequence: str, condition: Condition, version: int | None = None) -> TaskSpec:
     what = "clean re-render (sanity)" if condition.is_clean else f"viewpoint noise {condition.name}"
     if source == "bev" and not condition.is_clean:
         what += (" (queries: the images resampled to the moved viewpoint, nearest neighbour; "
                  "what lies beyond the image is empty)")
     return TaskSpec(
-        id=paper_id(source, sequence, condition),
+        id=paper_id(source, sequence, condition, version),
         source=source,
         sequence=sequence,
         protocol="paper",
@@ -99,14 +128,15 @@ def _paper(source: str, sequence: str, condition: Condition) -> TaskSpec:
         step=PAPER_STEP,
         tp_radius_m=PAPER_TP_RADIUS_M,
         fp_radius_m=PAPER_TP_RADIUS_M,
-        description=f"paper protocol, {what}",
+        data_version=_data_version(source, version),
+        description=f"paper protocol, {what}{_superseded_note(source, version)}",
         map_config=None if source == "bev" else MapConfig(),
     )
 
 
-def _revisit(source: str, sequence: str) -> TaskSpec:
+def _revisit(source: str, sequence: str, version: int | None = None) -> TaskSpec:
     return TaskSpec(
-        id=revisit_id(source, sequence),
+        id=revisit_id(source, sequence, version),
         source=source,
         sequence=sequence,
         protocol="revisit",
@@ -114,7 +144,9 @@ def _revisit(source: str, sequence: str) -> TaskSpec:
         tp_radius_m=REVISIT_TP_RADIUS_M,
         fp_radius_m=REVISIT_FP_RADIUS_M,
         window_s=REVISIT_WINDOW_S,
-        description="revisit protocol, loop closure within the sequence",
+        data_version=_data_version(source, version),
+        description="revisit protocol, loop closure within the sequence"
+                    + _superseded_note(source, version),
         map_config=None if source == "bev" else MapConfig(),
     )
 
@@ -160,6 +192,22 @@ def register_builtin() -> None:
             _add(("revisit", *(("bev-revisit",) if source == "bev" else ())), _revisit(source, sequence))
     for sequence in BEVPLACE_RANGES:
         _add(("bev-bevplace",), _bevplace("bev", sequence))
+    for version in SYNTH_DATA_VERSIONS:  # superseded synthetic versions: registered, in no suite
+        if version == TASK_VERSION["synth"]:
+            continue
+        old = [_paper("synth", sequence, condition, version)
+               for sequence in PAPER_SOURCE_SEQUENCES["synth"] for condition in (*PAPER_CONDITIONS, CLEAN)]
+        old += [_revisit("synth", sequence, version) for sequence in REVISIT_SEQUENCES["synth"]]
+        for task in old:
+            register(task)
+            _SUPERSEDED.append(task.id)
+
+
+def superseded() -> list[str]:
+    """Ids of the built-in tasks of older versions (the synthetic tasks' v0): registered, so that
+    their records resolve, but in no suite; a synthetic one cannot be run
+    (`registry.check_data_version`)."""
+    return list(_SUPERSEDED)
 
 
 def suite(name: str, source: str | None = None) -> list[str]:

@@ -1,8 +1,10 @@
 """The task registry, modelled on Gymnasium's: `register`, `spec`, `make`, `registry`.
 
-Ids are versioned (`SAFL/Synth00-T1R1-v0`). An id without its version resolves to the latest
+Ids are versioned (`SAFL/Synth00-T1R1-v1`). An id without its version resolves to the latest
 registered version, with a warning naming it; an old version still resolves (old records stay
-reproducible) with a warning naming the newer one. Unknown ids raise `RegistryError` with a
+readable) with a warning naming the newer one. A synthetic task defined on other synthetic data
+than this safl-bench generates resolves too, but `make` (and a run) refuses it in one line
+naming the task to run instead (`check_data_version`). Unknown ids raise `RegistryError` with a
 "did you mean" suggestion. Every task is also registered with Gymnasium (lazily: nothing is
 loaded until `gymnasium.make`), so `gymnasium.make(task_id)` gives the streaming environment.
 """
@@ -15,7 +17,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from safl_bench.errors import ConfigError, RegistryError
-from safl_bench.tasks.spec import TaskSpec, make_id, parse_id
+from safl_bench.tasks.spec import TaskSpec, current_synth_data_version, make_id, parse_id
 
 if TYPE_CHECKING:
     from safl_bench.sources import DataSource
@@ -102,6 +104,37 @@ def spec(task_id: str) -> TaskSpec:
     raise RegistryError(f"task {task_id} has no version v{version}; registered versions: {listed}")
 
 
+def check_data_version(spec_: TaskSpec) -> None:
+    """Raise ConfigError when `spec_` is a synthetic task defined on another version of the
+    synthetic data than the one this safl-bench generates: its data cannot be made any more, so
+    it may be looked up (its records resolve) but not materialised or run. The message names the
+    registered version of the task on the current data."""
+    if spec_.source != "synth":
+        return
+    current = current_synth_data_version()
+    if spec_.data_version == current:
+        return
+    newer = [s.version for s in registry.values() if s.namespace == spec_.namespace
+             and s.name == spec_.name and s.data_version == current]
+    instead = (f"run {make_id(spec_.namespace, spec_.name, max(newer))}" if newer
+               else f"register the task under a new version on data version {current}")
+    raise ConfigError(
+        f"{spec_.id} was defined on synthetic data version {spec_.data_version}; this safl-bench "
+        f"generates version {current}: {instead} (or, for the old data, a safl-bench that "
+        f"generates version {spec_.data_version})"
+    )
+
+
+def runnable_spec(task_id: str) -> TaskSpec:
+    """`spec(task_id)` of a task about to be materialised or run: `check_data_version` first,
+    so that an old synthetic task fails in one line (before `spec` warns that it is superseded)."""
+    if task_id in registry:
+        check_data_version(registry[task_id])
+    found = spec(task_id)
+    check_data_version(found)
+    return found
+
+
 def make(
     task_id: str,
     *,
@@ -118,9 +151,10 @@ def make(
     `source` overrides the source the spec names (it must be of the same kind); otherwise KITTI
     tasks take `kitti_root` or $SAFL_KITTI_ROOT, top-view image tasks `bev_root` or
     $SAFL_BEV_ROOT (at `bev_resolution_m` metres per pixel, default 0.4) and synthetic tasks the
-    embedded default.
+    embedded default. A synthetic task on other synthetic data than this safl-bench generates
+    raises ConfigError (`check_data_version`).
     """
     from safl_bench.tasks.task import Task
 
-    return Task.from_spec(spec(task_id), kitti_root=kitti_root, bev_root=bev_root,
+    return Task.from_spec(runnable_spec(task_id), kitti_root=kitti_root, bev_root=bev_root,
                           bev_resolution_m=bev_resolution_m, source=source, progress=progress)

@@ -1,10 +1,15 @@
 """`TaskSpec`: the frozen definition of one benchmark task (what makes two runs comparable).
 
-A task id follows Gymnasium's `[namespace/]name-v{version}` form, e.g. `SAFL/Synth00-T5R1.5-v0`.
+A task id follows Gymnasium's `[namespace/]name-v{version}` form, e.g. `SAFL/Synth00-T5R1.5-v1`.
 Everything that changes a task's data or its ground truth is a field of the spec and enters its
 `fingerprint`, which result records store: a record made under a different definition of the
 same id can then be detected. A changed definition gets a new version; old versions stay
 registered so that old records stay reproducible.
+
+Tasks on the synthetic default also name the version of the synthetic data they were defined on
+(`data_version`, the generator's `GENERATOR_VERSION`): a new generator output is a new definition.
+This safl-bench generates one version only, so a task on another one can be looked up (its
+records resolve) but not materialised or run (`check_data_version`).
 """
 
 from __future__ import annotations
@@ -23,6 +28,11 @@ from safl_bench.noise import CLEAN, Condition
 DEFINITION_REVISION = 1
 
 SOURCES = ("synth", "kitti", "bev")
+
+#: The synthetic data version of the definitions that predate the `data_version` field (task
+#: version v0 of the synthetic tasks): it is left out of their definition, so their fingerprints
+#: stay those their records hold.
+FIRST_SYNTH_DATA_VERSION = "1"
 PROTOCOLS = ("paper", "revisit", "bevplace")
 
 #: Gymnasium's id grammar: `[namespace/]name[-v{version}]`.
@@ -33,9 +43,16 @@ def parse_id(task_id: str) -> tuple[str | None, str, int | None]:
     """Split a task id into (namespace, name, version); version None when the id has none."""
     match = ID_RE.fullmatch(task_id)
     if not match:
-        raise ConfigError(f"malformed task id {task_id!r} (expected e.g. 'SAFL/Synth00-T1R1-v0')")
+        raise ConfigError(f"malformed task id {task_id!r} (expected e.g. 'SAFL/Synth00-T1R1-v1')")
     version = match.group("version")
     return match.group("namespace"), match.group("name"), None if version is None else int(version)
+
+
+def current_synth_data_version() -> str:
+    """The version of the synthetic data this safl-bench generates (`synth.GENERATOR_VERSION`)."""
+    from safl_bench.synth.config import GENERATOR_VERSION  # lazy: the generator package is heavy
+
+    return GENERATOR_VERSION
 
 
 def make_id(namespace: str | None, name: str, version: int | None) -> str:
@@ -61,6 +78,8 @@ class TaskSpec:
     database_frames, query_frames: [start, stop) frame ranges of the database and the queries
         (protocol "bevplace" only; every `step`-th frame of each range).
     seed: seed of the viewpoint noise (`safl_bench.noise.sample_offsets`).
+    data_version: the version of the synthetic data the task is defined on (source "synth" only;
+        None there means the version this safl-bench generates, `synth.GENERATOR_VERSION`).
     map_config: every setting of the top-view maps rendered from scans (None for an image source,
         whose views are its images).
     """
@@ -79,6 +98,7 @@ class TaskSpec:
     tp_radius_m: float = 10.0
     fp_radius_m: float = 10.0
     window_s: float | None = None
+    data_version: str | None = None
     description: str = ""
     namespace: str | None = field(init=False, repr=False, compare=False)
     name: str = field(init=False, repr=False, compare=False)
@@ -97,6 +117,12 @@ class TaskSpec:
             raise ConfigError(
                 f"task {self.id}: source must be one of {SOURCES}, got {self.source!r}"
             )
+        if self.source != "synth" and self.data_version is not None:
+            raise ConfigError(f"task {self.id}: data_version belongs to synthetic tasks only")
+        if self.source == "synth":
+            object.__setattr__(self, "data_version",
+                               current_synth_data_version() if self.data_version is None
+                               else str(self.data_version))
         if self.protocol not in PROTOCOLS:
             raise ConfigError(
                 f"task {self.id}: protocol must be one of {PROTOCOLS}, got {self.protocol!r}"
@@ -161,6 +187,8 @@ class TaskSpec:
         if self.protocol == "bevplace":  # only where set: older definitions keep their fingerprints
             out["database_frames"] = list(self.database_frames or ())
             out["query_frames"] = list(self.query_frames or ())
+        if self.source == "synth" and self.data_version != FIRST_SYNTH_DATA_VERSION:
+            out["data_version"] = self.data_version  # likewise: v0's fingerprints stay as they were
         return out
 
     @property

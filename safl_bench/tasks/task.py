@@ -4,7 +4,7 @@ Views are what methods read, by kind: "topview" (F, H, W) float32 maps in [0, 1]
 (a list of (M_i, 3) float32 local-map points in the viewpoint frame). They come from the map
 cache on first access, so making a task is cheap until a view is asked for:
 
-    task = safl_bench.tasks.make("SAFL/Synth00-T5R1.5-v0")
+    task = safl_bench.tasks.make("SAFL/Synth00-T5R1.5-v1")
     db = task.database("topview")      # clean maps of every `step`-th frame
     q = task.queries("topview")        # the same frames re-rendered with viewpoint noise
     labels = task.truth.labels(match)  # per query: TP 1, FP -1, excluded 0
@@ -107,7 +107,11 @@ class Task:
         source: DataSource | None = None,
         progress: bool = True,
     ) -> Task:
-        """Open the spec's data source and sequence (or `source`, of the same kind)."""
+        """Open the spec's data source and sequence (or `source`, of the same kind); a synthetic
+        task on other synthetic data than this safl-bench generates is a ConfigError."""
+        from safl_bench.tasks.registry import check_data_version
+
+        check_data_version(spec)
         if source is None:
             from safl_bench.sources import DEFAULT_RESOLUTION_M, open_source
 
