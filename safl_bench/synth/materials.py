@@ -24,6 +24,7 @@ FENCE = 12
 WALL = 13
 HEDGE = 14
 SIGN = 15
+TALL_GRASS = 16
 
 FACADES = (FACADE_A, FACADE_B, FACADE_C)
 
@@ -45,6 +46,7 @@ _TABLE = {
     WALL: (0.33, 0.06, 0.0),
     HEDGE: (0.28, 0.08, 0.45),
     SIGN: (0.92, 0.05, 0.0),
+    TALL_GRASS: (0.26, 0.09, 0.6),
 }
 
 N_MATERIALS = max(_TABLE) + 1
