@@ -18,6 +18,8 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   Context's column-shift cosine distance (`baselines.scan_context.distance_matrix`). The same
   medians against the heading difference of pairs at the same place (within `SAME_PLACE_M`,
   3 m; 30 degree bins) show what turning does to each descriptor;
+- `goals`: the issue's targets (`EXCESS_GOAL`, the real non-zero range widened by `NONZERO_WIDEN`
+  of each end's value, `TAU_GOAL`), each with its value and whether it is met;
 - `envelope_excess`: how far, at its worst bin, a synthetic curve lies outside the min-max
   envelope of the real sequences' curves (0 when inside everywhere); bins without pairs on
   some side are skipped;
@@ -316,6 +318,40 @@ def measure(seq: SequenceImages, resolution_m: float = 0.4,
         desc = describe(seq.images, name, resolution_m)
         out.distance[name], out.heading[name] = pair_curves(desc, name, seq.positions, seq.headings)
     return out
+
+
+# -- the goals --------------------------------------------------------------------------------
+#: The synthetic SAD curve may lie at most this far outside the real envelope.
+EXCESS_GOAL = 0.03
+#: The synthetic non-zero share must lie in [min * (1 - w), max * (1 + w)] of the real shares.
+NONZERO_WIDEN = 0.10
+#: Kendall's tau of the methods' F1max, synthetic against the mean of the real sequences.
+TAU_GOAL = 0.8
+
+
+@dataclass
+class Goal:
+    """One target of the fidelity issue, its measured value and whether it is met."""
+
+    name: str
+    value: float | None
+    target: str
+    met: bool
+
+
+def goals(excess: float, nonzero_real: Sequence[float], nonzero_synthetic: float,
+          tau: float | None) -> list[Goal]:
+    """The three targets: curve envelope excess <= EXCESS_GOAL, the non-zero share inside the
+    real range with each end moved out by NONZERO_WIDEN of its value, ranking tau >= TAU_GOAL
+    (not met when there is no tau)."""
+    lo, hi = min(nonzero_real), max(nonzero_real)
+    lo, hi = lo * (1.0 - NONZERO_WIDEN), hi * (1.0 + NONZERO_WIDEN)
+    return [
+        Goal("curve_envelope_excess", excess, f"<= {EXCESS_GOAL:g}", excess <= EXCESS_GOAL + 1e-12),
+        Goal("nonzero_fraction", nonzero_synthetic, f"{100 * lo:.2f}-{100 * hi:.2f} %",
+             lo <= nonzero_synthetic <= hi),
+        Goal("ranking_tau", tau, f">= {TAU_GOAL:g}", tau is not None and tau >= TAU_GOAL),
+    ]
 
 
 # -- place recognition ------------------------------------------------------------------------

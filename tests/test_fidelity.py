@@ -74,6 +74,15 @@ def test_envelope_excess() -> None:
     assert value == pytest.approx(0.2) and where == 1
 
 
+def test_goals_check_each_target() -> None:
+    met = {g.name: g for g in F.goals(0.03, [0.063, 0.074], 0.058, 0.8)}
+    assert all(g.met for g in met.values())
+    assert met["nonzero_fraction"].target == "5.67-8.14 %"  # each end moved out by 10 % of it
+    missed = {g.name: g.met for g in F.goals(0.031, [0.063, 0.074], 0.056, None)}
+    assert missed == {"curve_envelope_excess": False, "nonzero_fraction": False, "ranking_tau": False}
+    assert not {g.name: g.met for g in F.goals(0.0, [0.063, 0.074], 0.082, 1.0)}["nonzero_fraction"]
+
+
 def test_ranking_tau() -> None:
     def res(m: str, t: str, f1: float | None) -> F.MethodResult:
         return F.MethodResult(m, t, None, f1, "record")
@@ -118,6 +127,10 @@ def test_fidelity_cli_end_to_end_on_tiny_data(kitti_root: Path, safl_home: Path,
     nz = report["nonzero_fraction"]
     assert nz["real"]["00"] == pytest.approx(nz["synthetic"]) and nz["synthetic"] > 0
     assert report["curve_envelope_excess"] == 0.0 and report["ranking_tau"] is None
+    goals = report["goals"]
+    assert goals["curve_envelope_excess"]["met"] and goals["nonzero_fraction"]["met"]
+    assert not goals["ranking_tau"]["met"]  # no place recognition, no tau
+    assert "goals: curve_envelope_excess 0.000 (goal <= 0.03): met" in text
 
 
 def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:

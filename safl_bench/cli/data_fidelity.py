@@ -197,6 +197,8 @@ def main(args: argparse.Namespace) -> int:
                                  bev_root=str(root), run=not args.no_run, progress=progress)
         taus = F.ranking_tau(pr, synth_task, real_tasks)
     runtime = time.perf_counter() - started
+    targets = F.goals(excess["sad"][0], [m.stats.nonzero_fraction for m in real_m],
+                      synth_m.stats.nonzero_fraction, taus.get("mean"))
 
     # -- the table ------------------------------------------------------------------------
     labels = [m.label for m in real_m] + [synth_m.label]
@@ -248,6 +250,9 @@ def main(args: argparse.Namespace) -> int:
         print(f"  note: {note}")
     print("Kendall tau of F1max, synthetic vs " + ", ".join(
         f"{t.split('/')[-1] if t != 'mean' else 'the real mean'} {_fmt(v)}" for t, v in taus.items()))
+    print("goals: " + "; ".join(
+        f"{g.name} {_fmt(g.value, pct=g.name == 'nonzero_fraction')} (goal {g.target}): {'met' if g.met else 'NOT met'}"
+        for g in targets))
     print(f"runtime {runtime:.1f} s (curves and statistics {curves_s:.1f} s)")
 
     out = Path(args.out).expanduser()
@@ -263,6 +268,7 @@ def main(args: argparse.Namespace) -> int:
             "mean_nonzero": {"real": {m.label.split()[-1]: m.stats.mean_nonzero for m in real_m},
                              "synthetic": synth_m.stats.mean_nonzero},
             "ranking_tau": taus.get("mean"),
+            "goals": {g.name: {"value": g.value, "target": g.target, "met": g.met} for g in targets},
             "ranking_tau_per_sequence": {t: v for t, v in taus.items() if t != "mean"},
             "place_recognition": {m: {t: to_jsonable(r) for t, r in per.items()} for m, per in pr.items()},
             "sequences": {m.label: to_jsonable(m) for m in measured},
