@@ -7,7 +7,10 @@ with a per-material probability. Returns get Gaussian range noise, reflectance f
 and the incidence angle, and random dropouts that grow with range and for dark surfaces.
 
 Random numbers inside the ray caster come from a counter-based hash of (frame key, ray, draw),
-so the result does not depend on the order rays are processed in.
+so the result does not depend on the order rays are processed in. Porosity is a fixed property
+of the world (a hash of the cell and a 0.2 m height bin, `_voxel_uniform`): the same leaves
+block the same rays in every scan, as static foliage does (data version 1 drew it per ray and
+scan, which made vegetation flicker between frames).
 """
 
 from __future__ import annotations
@@ -40,6 +43,19 @@ def _normal(key: np.uint64, ray: int, draw: int) -> float:
     u1 = _uniform(key, ray, draw)
     u2 = _uniform(key, ray, draw + 1)
     return math.sqrt(-2.0 * math.log(1.0 - u1)) * math.cos(2.0 * math.pi * u2)
+
+
+#: Height of the voxels whose porosity is fixed (`_voxel_uniform`), metres.
+POROUS_VOXEL_Z = 0.2
+
+
+@numba.njit(cache=True, inline="always")
+def _voxel_uniform(cx: int, cy: int, z: float) -> float:
+    """A uniform number fixed for the raster cell (cx, cy) at height z (0.2 m bins): porous
+    matter (leaves, twigs, fence boards) does not move between scans, so whether a ray gets
+    through a porous cell depends on where it crosses, not on the scan."""
+    iz = math.floor(z / POROUS_VOXEL_Z) + 4096
+    return _uniform(np.uint64(0x5AF1B3C7), cx * 1000003 + cy, iz)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -79,7 +95,6 @@ def cast_scan(dirs, gain, rot, origin, cell, cells, gmat, tmat, fmat, coarse, bl
             stepy, tmaxy, tdy = 0, inf, inf
         t_in = 0.0
         axis = -1
-        draw = 4
         hit_t = inf
         hit_m = 0
         hit_cos = 0.0
@@ -130,8 +145,7 @@ def cast_scan(dirs, gain, rot, origin, cell, cells, gmat, tmat, fmat, coarse, bl
                     t, c = (tp - oz) / dz, -dz
                 if t < hit_t:
                     m = tmat[cy, cx]
-                    draw += 1
-                    if pass_prob[m] <= 0.0 or _uniform(key, k, draw) >= pass_prob[m]:
+                    if pass_prob[m] <= 0.0 or _voxel_uniform(cx, cy, oz + t * dz) >= pass_prob[m]:
                         hit_t, hit_m, hit_cos = t, m, c
             # floating interval (crowns, plates)
             fl, fh = cells[cy, cx, 2], cells[cy, cx, 3]
@@ -145,8 +159,7 @@ def cast_scan(dirs, gain, rot, origin, cell, cells, gmat, tmat, fmat, coarse, bl
                     t, c = (fl - oz) / dz, dz
                 if t < hit_t:
                     m = fmat[cy, cx]
-                    draw += 1
-                    if pass_prob[m] <= 0.0 or _uniform(key, k, draw) >= pass_prob[m]:
+                    if pass_prob[m] <= 0.0 or _voxel_uniform(cx, cy, oz + t * dz) >= pass_prob[m]:
                         hit_t, hit_m, hit_cos = t, m, c
             if hit_t < inf:
                 break
