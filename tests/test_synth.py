@@ -155,3 +155,30 @@ def test_cli_show_draws_png(tiny_root: Path, tmp_path: Path) -> None:
     assert cli_main(["data", "show", "--root", str(tiny_root), "--sequence", "00",
                      "--out", str(out), "--scans", "2"]) == 0
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_vehicle_follows_the_land() -> None:
+    from safl_bench.synth.generate import make_route, make_scene_world
+    from safl_bench.synth.terrain import make_terrain
+
+    terrain = make_terrain(np.random.default_rng(3))
+    x, y, h = np.array([10.0, 250.0]), np.array([-40.0, 600.0]), 1e-4
+    gx, gy = terrain.gradient(x, y)
+    assert np.allclose(gx, (terrain.height(x + h, y) - terrain.height(x - h, y)) / (2 * h), atol=1e-6)
+    assert np.allclose(gy, (terrain.height(x, y + h) - terrain.height(x, y - h)) / (2 * h), atol=1e-6)
+
+    scene = make_route("01", 0, synth.SynthConfig(frames=60))
+    world, _ = make_scene_world(scene)
+    poses = scene.poses
+    ground = scene.grid.terrain.height(poses[:, 0, 3], poses[:, 1, 3])
+    assert np.ptp(ground) > 0.05  # the land is not flat under the route
+    assert np.allclose(poses[:, 2, 3] - ground, scene.config.sensor_height_m)
+    # the world raster's road surface under the vehicle is the same land (to the cell's size)
+    iy = (poses[:, 1, 3] / world.cell).astype(int)
+    ix = (poses[:, 0, 3] / world.cell).astype(int)
+    assert np.abs(world.ground[iy, ix] - ground).max() < 0.05
+    # nose up when the road climbs ahead: the forward axis points up the slope
+    climb = np.diff(ground)
+    forward_z = poses[:-1, 2, 0]
+    big = np.abs(climb) > 0.02
+    assert big.any() and np.mean(np.sign(forward_z[big]) == np.sign(climb[big])) > 0.9

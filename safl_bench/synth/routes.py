@@ -24,7 +24,8 @@ TURN_RADIUS_M = 9.0
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Sampled vehicle states: world xy (n,2), heading (n,), roll/pitch (n,), times (n,)."""
+    """Sampled vehicle states: world xy (n,2), heading (n,), roll/pitch (n,), times (n,), and
+    the height of the ground under the vehicle (n,)."""
 
     xy: np.ndarray
     heading: np.ndarray
@@ -32,6 +33,7 @@ class Trajectory:
     pitch: np.ndarray
     times: np.ndarray
     nodes: tuple[tuple[int, int], ...]  # the crossings visited, in order
+    ground_z: np.ndarray | None = None  # None: flat ground at height 0
 
     def __len__(self) -> int:
         return len(self.times)
@@ -184,13 +186,21 @@ def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
     jitter = rng.uniform(-0.002, 0.002, size=frames)
     jitter[0] = 0.0
     times = np.arange(frames) / rate_hz + jitter
+    xy = np.stack([np.interp(pos, s, x), np.interp(pos, s, y)], axis=1)
+    yaw = np.interp(pos, s, heading)
+    # the body follows the land: pitch from the slope ahead (nose up uphill is negative pitch
+    # in R = Rz Ry Rx), roll from the slope to the left; plus the suspension's small motions
+    gx, gy = grid.terrain.gradient(xy[:, 0], xy[:, 1])
+    ahead = gx * np.cos(yaw) + gy * np.sin(yaw)
+    left = -gx * np.sin(yaw) + gy * np.cos(yaw)
     return Trajectory(
-        xy=np.stack([np.interp(pos, s, x), np.interp(pos, s, y)], axis=1),
-        heading=np.interp(pos, s, heading),
-        roll=np.radians(_smooth_noise(frames, rng, corr=0.97, scale=0.25)),
-        pitch=np.radians(_smooth_noise(frames, rng, corr=0.97, scale=0.3)),
+        xy=xy,
+        heading=yaw,
+        roll=np.arctan(left) + np.radians(_smooth_noise(frames, rng, corr=0.97, scale=0.25)),
+        pitch=-np.arctan(ahead) + np.radians(_smooth_noise(frames, rng, corr=0.97, scale=0.3)),
         times=times,
         nodes=tuple(driven),
+        ground_z=grid.terrain.height(xy[:, 0], xy[:, 1]),
     )
 
 
@@ -213,7 +223,7 @@ def sensor_poses(traj: Trajectory, sensor_height: float) -> np.ndarray:
     poses[:, 2, 2] = cp * cr
     poses[:, 0, 3] = traj.xy[:, 0]
     poses[:, 1, 3] = traj.xy[:, 1]
-    poses[:, 2, 3] = sensor_height
+    poses[:, 2, 3] = sensor_height + (0.0 if traj.ground_z is None else traj.ground_z)
     poses[:, 3, 3] = 1.0
     return poses
 

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from safl_bench.synth.terrain import FLAT, Terrain, make_terrain
+
 #: margin of blocks beyond the outermost streets, metres
 MARGIN_M = 55.0
 
@@ -72,6 +74,8 @@ class StreetGrid:
     size_u: float  # plan extent [0, size_u] x [0, size_v]
     size_v: float
     warp: Warp
+    #: the ground's height field (world frame) under streets and blocks alike
+    terrain: Terrain = FLAT
 
     def node(self, i: int, j: int) -> tuple[float, float]:
         """Plan position of the crossing of street line u_i and v_j."""
@@ -101,4 +105,4 @@ def make_street_grid(lines: int, rng: np.random.Generator) -> StreetGrid:
         ly=(rng.uniform(500, 850), rng.uniform(200, 320)),
         py=(rng.uniform(0, 2 * np.pi), rng.uniform(0, 2 * np.pi)),
     )
-    return StreetGrid(u, v, uh, vh, uw, vw, size_u, size_v, warp)
+    return StreetGrid(u, v, uh, vh, uw, vw, size_u, size_v, warp, make_terrain(rng))

@@ -17,7 +17,8 @@ pillars and steps on facades, hedged front gardens with bushes and cars in drive
 in parks and open fields, more parked cars, lower tree crowns, and ground rising inside parks,
 open fields and gardens (`TERRAIN`: embankments and raised gardens, whose far parts rise above
 the BEV-density encoding's ground cut as real KITTI's do); porosity became a fixed property of
-the world (`safl_bench.synth.lidar`).
+the world (`safl_bench.synth.lidar`), and the whole town lies on rolling land
+(`safl_bench.synth.terrain`) that the vehicle follows.
 """
 
 from __future__ import annotations
@@ -472,4 +473,7 @@ def make_world(grid: StreetGrid, rng: np.random.Generator, cell: float = 0.2) ->
             src = getattr(plan, name)[iv, iu]
             default = {"g": SIDEWALK_Z, "gm": M.GRASS}.get(name, 0)
             arr[r0:r0 + len(ys)] = np.where(ok, src, np.asarray(default, dtype=src.dtype))
+        lift = grid.terrain.height(x, y).astype(np.float32)  # every height rides on the land
+        for name in ("g", "top", "lo", "hi"):
+            out[name][r0:r0 + len(ys)] += lift
     return World(cell, out["g"], out["gm"], out["top"], out["tm"], out["lo"], out["hi"], out["fm"], grid)
