@@ -13,8 +13,8 @@ as in a real town.
 Data version 2 added what real KITTI streets have 4-15 m from the sensor and version 1 lacked
 (measured with `safl-bench data fidelity` against BEVPlace's images of KITTI 00 and 02: 2.5 %
 non-zero pixels against 6.3-7.4 %): bushes and hedges along most street edges, bay windows,
-pillars and steps on facades, hedged front gardens with bushes and cars in driveways, tall grass
-in parks and open fields, more parked cars, lower tree crowns, and ground rising inside parks,
+pillars and steps on facades, hedged front gardens with bushes, rough grass and cars in
+driveways, tall grass in parks and open fields, more parked cars, lower tree crowns, and ground rising inside parks,
 open fields and gardens (`TERRAIN`: embankments and raised gardens, whose far parts rise above
 the BEV-density encoding's ground cut as real KITTI's do); porosity became a fixed property of
 the world (`safl_bench.synth.lidar`), and the whole town lies on rolling land
@@ -402,6 +402,12 @@ class _Town:
                     height = {1: rng.uniform(1.1, 1.8), 2: rng.uniform(1.1, 1.6), 3: rng.uniform(0.8, 1.5)}[boundary]
                     mat = {1: M.HEDGE, 2: M.FENCE, 3: M.WALL}[boundary]
                     self.box(vertical, a - 1.0, a + lot - 4.0, *_span((b, b + inward * thick)), height, mat)
+                if rng.random() < 0.5:  # an unkempt front garden
+                    g0, g1 = _span((edge + inward * 0.8, edge + inward * max(setback - 0.5, 1.0)))
+                    if vertical:
+                        self.meadow(g0, g1, a, a + house_w, rng.uniform(0.3, 0.8))
+                    else:
+                        self.meadow(a, a + house_w, g0, g1, rng.uniform(0.3, 0.8))
                 for _ in range(int(rng.integers(1, 5))):  # bushes in the front garden
                     u, v = self.point(vertical, a + rng.uniform(0, house_w), edge + inward * rng.uniform(1.2, max(setback - 1.0, 1.3)))
                     self.shrub(u, v)
