@@ -33,7 +33,7 @@ class Trajectory:
     pitch: np.ndarray
     times: np.ndarray
     nodes: tuple[tuple[int, int], ...]  # the crossings visited, in order
-    ground_z: np.ndarray | None = None  # None: flat ground at height 0
+    ground_z: np.ndarray  # height of the land under the vehicle (n,)
 
     def __len__(self) -> int:
         return len(self.times)
@@ -223,7 +223,7 @@ def sensor_poses(traj: Trajectory, sensor_height: float) -> np.ndarray:
     poses[:, 2, 2] = cp * cr
     poses[:, 0, 3] = traj.xy[:, 0]
     poses[:, 1, 3] = traj.xy[:, 1]
-    poses[:, 2, 3] = sensor_height + (0.0 if traj.ground_z is None else traj.ground_z)
+    poses[:, 2, 3] = sensor_height + traj.ground_z
     poses[:, 3, 3] = 1.0
     return poses
 

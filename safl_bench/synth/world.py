@@ -14,11 +14,11 @@ Data version 2 added what real KITTI streets have 4-15 m from the sensor and ver
 (measured with `safl-bench data fidelity` against BEVPlace's images of KITTI 00 and 02: 2.5 %
 non-zero pixels against 6.3-7.4 %): bushes and hedges along most street edges, bay windows,
 pillars and steps on facades, hedged front gardens with bushes, rough grass and cars in
-driveways, tall grass in parks and open fields, more parked cars, lower tree crowns, and ground rising inside parks,
-open fields and gardens (`TERRAIN`: embankments and raised gardens, whose far parts rise above
-the BEV-density encoding's ground cut as real KITTI's do); porosity became a fixed property of
-the world (`safl_bench.synth.lidar`), and the whole town lies on rolling land
-(`safl_bench.synth.terrain`) that the vehicle follows.
+driveways, tall grass in parks and open fields, more parked cars, lower tree crowns, and
+ground rising inside parks, open fields and gardens (`TERRAIN`: embankments and raised gardens,
+whose far parts rise above the BEV-density encoding's ground cut as real KITTI's do); porosity
+became a fixed property of the world (`safl_bench.synth.lidar`), and the whole town lies on
+rolling land (`safl_bench.synth.terrain`) that the vehicle follows.
 """
 
 from __future__ import annotations
@@ -33,15 +33,15 @@ from safl_bench.synth.streets import StreetGrid
 
 SIDEWALK_Z = 0.12  # kerb height: everything but the carriageway is raised by this much
 LANE_OFFSET_M = 1.6  # driving lane centre, right of the street centre line
-#: Ground rising inside a block, per kind (with probability 0.7): (slope), (flat margin m),
-#: (highest rise m), each drawn uniformly in its range; the streets stay flat.
+#: Ground rising inside a block of these kinds (with probability `TERRAIN_P`): (slope),
+#: (flat margin m), (highest rise m), each drawn uniformly in its range; streets, urban blocks
+#: and parking lots stay flat.
 TERRAIN: dict[str, tuple[tuple[float, float], tuple[float, float], tuple[float, float]]] = {
-    "urban": ((0.0, 0.0), (0.0, 0.0), (0.0, 0.0)),
     "residential": ((0.03, 0.08), (0.5, 2.0), (0.5, 1.5)),
     "park": ((0.03, 0.12), (0.0, 3.0), (0.8, 3.0)),
     "open": ((0.03, 0.15), (0.0, 3.0), (1.0, 4.0)),
-    "parking": ((0.0, 0.0), (0.0, 0.0), (0.0, 0.0)),
 }
+TERRAIN_P = 0.85
 
 
 @dataclass
@@ -337,8 +337,8 @@ class _Town:
         for u0, u1 in us:
             for v0, v1 in vs:
                 kind = kinds[int(self.rng.choice(len(kinds), p=weights))]
-                slope, start, top = TERRAIN[kind]
-                if top[1] > 0 and self.rng.random() < 0.85:
+                if kind in TERRAIN and self.rng.random() < TERRAIN_P:
+                    slope, start, top = TERRAIN[kind]
                     self.p.rise(u0, u1, v0, v1, self.rng.uniform(*slope), self.rng.uniform(*start),
                                 self.rng.uniform(*top))
                 getattr(self, f"block_{kind}")(u0, u1, v0, v1)
