@@ -84,7 +84,7 @@ def resolve_tasks(items: Sequence[str], *, source: str = "synth") -> list[str]:
     Suites pick the tasks on `source` ("synth", the embedded default; "kitti"; "bev", top-view
     images); the 'bev-...' suites are top-view image tasks whatever `source`. No items means the
     'paper' suite. A synthetic task on other synthetic data than this safl-bench generates (the
-    synthetic tasks' v0) is a ConfigError naming the version to run (`check_data_version`).
+    synthetic tasks' v0 and v1) is a ConfigError naming the version to run (`check_data_version`).
     """
     out: list[str] = []
     for item in items or ["paper"]:

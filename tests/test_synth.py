@@ -182,3 +182,31 @@ def test_the_vehicle_follows_the_land() -> None:
     forward_z = poses[:-1, 2, 0]
     big = np.abs(climb) > 0.02
     assert big.any() and np.mean(np.sign(forward_z[big]) == np.sign(climb[big])) > 0.9
+
+
+def test_the_vehicle_wanders_in_its_lane() -> None:
+    """Revisits see the street from a slightly different lateral position (data version 3), the
+    path stays smooth and the vehicle stays within its lane range."""
+    from safl_bench.synth.routes import WANDER_RANGE_M, lane_wander
+
+    rng = np.random.default_rng(5)
+    ends = np.array([400, 900, 1500])
+    w = lane_wander(ends, 1500, 0.25, rng)
+    assert w.min() >= WANDER_RANGE_M[0] and w.max() <= WANDER_RANGE_M[1]
+    assert np.abs(np.diff(w)).max() < 0.02  # under 2 cm of sideways drift per 0.25 m of travel
+    assert w.std() > 0.05
+
+    scene = synth.make_route("00", seed=synth.DEFAULT_SEED)
+    traj = scene.trajectory
+    heading_step = np.abs(np.angle(np.exp(1j * np.diff(traj.heading))))
+    assert np.median(heading_step) < np.radians(0.2)  # straight streets stay straight
+    lateral = []
+    old = traj.times[:, None] - traj.times[None, :] > 30.0
+    dist = np.linalg.norm(traj.xy[:, None] - traj.xy[None], axis=2)
+    same_way = np.abs(np.angle(np.exp(1j * (traj.heading[:, None] - traj.heading[None])))) < np.pi / 4
+    for i in np.flatnonzero((old & (dist < 5.0) & same_way).any(axis=1)):
+        cand = np.flatnonzero(old[i] & (dist[i] < 5.0) & same_way[i])
+        j = cand[np.argmin(dist[i, cand])]
+        v = traj.xy[j] - traj.xy[i]
+        lateral.append(abs(-np.sin(traj.heading[i]) * v[0] + np.cos(traj.heading[i]) * v[1]))
+    assert len(lateral) > 20 and np.median(lateral) > 0.05  # data version 2: 0.00

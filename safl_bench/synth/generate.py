@@ -67,9 +67,11 @@ def make_route(name: str, seed: int = 0, config: SynthConfig | None = None) -> S
     """The streets and route of a sequence, without drawing the town (cheap)."""
     config = config or SynthConfig()
     spec = config.spec(name)
-    rngs = [np.random.default_rng(s) for s in sequence_seed(seed, name).spawn(4)]
+    # streets, town, route, sensor, lateral wander (the fifth, added in data version 3, leaves
+    # the first four as they were)
+    rngs = [np.random.default_rng(s) for s in sequence_seed(seed, name).spawn(5)]
     grid = make_street_grid(spec.grid_lines, rngs[0])
-    traj = plan_trajectory(grid, spec.frames, rngs[2], revisits=spec.revisits,
+    traj = plan_trajectory(grid, spec.frames, rngs[2], wander_rng=rngs[4], revisits=spec.revisits,
                            rate_hz=config.rate_hz)
     return Scene(name, seed, config, grid, traj, sensor_poses(traj, config.sensor_height_m), rngs)
 
