@@ -39,7 +39,7 @@ def test_distance_and_heading_curves_of_hand_made_images() -> None:
     positions = np.array([[0, 0], [1, 0], [150, 0], [151, 0], [300, 0], [5, 0]], float)
     headings = np.radians([0, 100, 0, 0, 0, 0])
     desc = F.describe(images, "sad")
-    curve, turn = F.pair_curves(desc, "sad", positions, headings)
+    curve, turn, same_way = F.pair_curves(desc, "sad", positions, headings)
     d = F.differences(desc, desc, "sad")
     far = [d[i, j] for i in range(6) for j in range(i + 1, 6) if abs(positions[i, 0] - positions[j, 0]) > 100]
     assert len(far) == 11 and curve.far_median == pytest.approx(float(np.median(far)))
@@ -49,6 +49,10 @@ def test_distance_and_heading_curves_of_hand_made_images() -> None:
     assert curve.counts[2] == 2 and d[0, 5] > 0
     # pairs within 3 m: (0, 1) turned 100 degrees, (2, 3) not turned
     assert turn.counts == [1, 0, 0, 1, 0, 0] and turn.values[0] == turn.values[3] == 0.0
+    # the same-way curve leaves out the turned pairs: (0, 1) at 1 m, and (1, 5) at 4 m
+    assert same_way.counts[0] == 1 and same_way.counts[2] == 1
+    assert same_way.values[2] == pytest.approx(d[0, 5] / curve.far_median)
+    assert same_way.far_median == curve.far_median
 
 
 def test_polar_descriptor_is_rotation_invariant_and_sad_is_not() -> None:
@@ -127,6 +131,7 @@ def test_fidelity_cli_end_to_end_on_tiny_data(kitti_root: Path, safl_home: Path,
     nz = report["nonzero_fraction"]
     assert nz["real"]["00"] == pytest.approx(nz["synthetic"]) and nz["synthetic"] > 0
     assert report["curve_envelope_excess"] == 0.0 and report["ranking_tau"] is None
+    assert report["same_way_envelope_excess"] == {"sad": 0.0, "polar": 0.0}
     goals = report["goals"]
     assert goals["curve_envelope_excess"]["met"] and goals["nonzero_fraction"]["met"]
     assert not goals["ranking_tau"]["met"]  # no place recognition, no tau

@@ -4,7 +4,7 @@ Renders a synthetic sequence (default 00) in the BEV-density encoding (BEVPlace'
 scans, cached in the map cache), reads BEVPlace's images of the real sequences (`--bev-root`,
 default 00 and 02), and prints the statistics of `safl_bench.fidelity` side by side: image
 statistics, the difficulty curves of SAD and of the rotation-invariant polar descriptor against
-distance and heading difference, the envelope excess of the synthetic curves, and the
+distance (over all pairs, and over the pairs driving the same way) and heading difference, the envelope excess of the synthetic curves, and the
 place-recognition results of the top-view methods on the revisit protocol with Kendall's tau of
 their F1max ranking (records under --results, and --records, are reused; missing cells are run
 and written to --results, except BEVPlace's, about a second a frame on a CPU: run it first with
@@ -91,14 +91,18 @@ def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any],
     fig, axes = plt.subplots(2, 3, figsize=(16, 9))
     for m in measured:
         synth = m.label == synth_label
-        style = {"color": "k", "lw": 2.2} if synth else {"lw": 1.4}
+        lw = 2.2 if synth else 1.4
+        style: dict[str, Any] = {"color": "k", "lw": lw} if synth else {"lw": lw}
         st = m.stats
         mids = (np.asarray(st.radial_edges_m[:-1]) + np.asarray(st.radial_edges_m[1:])) / 2
         axes[0, 0].plot(mids, [np.nan if v is None else v for v in st.radial_profile], label=m.label, **style)
         for col, name in ((1, "sad"), (2, "polar")):
             c = m.distance[name]
             x = (np.asarray(c.edges[:-1]) + np.asarray(c.edges[1:])) / 2
-            axes[0, col].plot(x, [np.nan if v is None else v for v in c.values], marker=".", label=m.label, **style)
+            line, = axes[0, col].plot(x, [np.nan if v is None else v for v in c.values], marker=".", label=m.label, **style)
+            same_way = m.distance_same_way[name]
+            axes[0, col].plot(x, [np.nan if v is None else v for v in same_way.values], ls="--",
+                              color=line.get_color(), lw=lw * 0.7, label=f"{m.label}, same way")
             h = m.heading[name]
             x = (np.asarray(h.edges[:-1]) + np.asarray(h.edges[1:])) / 2
             axes[1, col - 1].plot(x, [np.nan if v is None else v for v in h.values], marker="o", label=m.label, **style)
@@ -180,6 +184,9 @@ def main(args: argparse.Namespace) -> int:
               for name in F.DESCRIPTORS}
     heading_excess = {name: F.envelope_excess(synth_m.heading[name], [m.heading[name] for m in real_m])
                       for name in F.DESCRIPTORS}
+    same_way_excess = {name: F.envelope_excess(synth_m.distance_same_way[name],
+                                               [m.distance_same_way[name] for m in real_m])
+                       for name in F.DESCRIPTORS}
     curves_s = time.perf_counter() - started
 
     registered = {m.name for m in list_methods()}
@@ -216,6 +223,9 @@ def main(args: argparse.Namespace) -> int:
         for k in range(len(c_edges) - 1):
             rows.append([f"{title} difference {c_edges[k]:g}-{c_edges[k + 1]:g} m",
                          *[_fmt(m.distance[name].values[k]) for m in order]])
+        for k in range(min(3, len(c_edges) - 1)):
+            rows.append([f"{title} difference {c_edges[k]:g}-{c_edges[k + 1]:g} m, same way",
+                         *[_fmt(m.distance_same_way[name].values[k]) for m in order]])
         h_edges = synth_m.heading[name].edges
         for k in range(len(h_edges) - 1):
             rows.append([f"{title} at same place, turned {h_edges[k]:g}-{h_edges[k + 1]:g} deg",
@@ -230,7 +240,10 @@ def main(args: argparse.Namespace) -> int:
         where = "" if kb is None else f" (worst at {synth_m.distance[name].edges[kb]:g}-{synth_m.distance[name].edges[kb + 1]:g} m)"
         hv, hk = heading_excess[name]
         hwhere = "" if hk is None else f" (worst at {synth_m.heading[name].edges[hk]:g}-{synth_m.heading[name].edges[hk + 1]:g} deg)"
-        print(f"{title} curve envelope excess: {value:.3f}{where}; against heading: {hv:.3f}{hwhere}")
+        sv, sk = same_way_excess[name]
+        swhere = "" if sk is None else f" (worst at {synth_m.distance[name].edges[sk]:g}-{synth_m.distance[name].edges[sk + 1]:g} m)"
+        print(f"{title} curve envelope excess: {value:.3f}{where}; pairs driving the same way "
+              f"(within {F.SAME_WAY_DEG:g} deg): {sv:.3f}{swhere}; against heading: {hv:.3f}{hwhere}")
     print()
     tasks = [*real_tasks, synth_task]
     prow = [["method", *[f"{t.split('/')[-1]} R@1 / F1max" for t in tasks]]]
@@ -263,6 +276,7 @@ def main(args: argparse.Namespace) -> int:
             "curve_envelope_excess": excess["sad"][0],
             "curve_envelope_excess_polar": excess["polar"][0],
             "heading_envelope_excess": {n: heading_excess[n][0] for n in F.DESCRIPTORS},
+            "same_way_envelope_excess": {n: same_way_excess[n][0] for n in F.DESCRIPTORS},
             "nonzero_fraction": {"real": {m.label.split()[-1]: m.stats.nonzero_fraction for m in real_m},
                                  "synthetic": synth_m.stats.nonzero_fraction},
             "mean_nonzero": {"real": {m.label.split()[-1]: m.stats.mean_nonzero for m in real_m},
