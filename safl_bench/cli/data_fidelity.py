@@ -4,11 +4,12 @@ Renders a synthetic sequence (default 00) in the BEV-density encoding (BEVPlace'
 scans, cached in the map cache), reads BEVPlace's images of the real sequences (`--bev-root`,
 default 00 and 02), and prints the statistics of `safl_bench.fidelity` side by side: image
 statistics, the difficulty curves of SAD and of the rotation-invariant polar descriptor against
-distance (over all pairs, and over the pairs driving the same way) and heading difference, the envelope excess of the synthetic curves, and the
-place-recognition results of the top-view methods on the revisit protocol with Kendall's tau of
-their F1max ranking (records under --results, and --records, are reused; missing cells are run
-and written to --results, except BEVPlace's, about a second a frame on a CPU: run it first with
-`safl-bench run --method bevplace ...`). Writes a PNG of the curves (--out) and, with --json,
+distance (over all pairs, and over the pairs driving the same way) and heading difference, the
+envelope excess of the synthetic curves, and the place-recognition results of the top-view
+methods on the revisit protocol with Kendall's tau of their F1max ranking (records under
+--results, and --records, are reused; missing cells are run and written to --results, except
+BEVPlace's, about a second a frame on a CPU: run it first with `safl-bench run --method
+bevplace ...`). Writes a PNG of the curves (--out) and, with --json,
 the numbers.
 """
 
@@ -72,6 +73,11 @@ def _fmt(v: float | None, pct: bool = False, digits: int = 3) -> str:
     if v is None:
         return "n/a"
     return f"{100 * v:.1f} %" if pct else f"{v:.{digits}f}"
+
+
+def _worst(edges: list[float], k: int | None, unit: str) -> str:
+    """" (worst at A-B unit)" for bin k of `edges`, "" without a worst bin."""
+    return "" if k is None else f" (worst at {edges[k]:g}-{edges[k + 1]:g} {unit})"
 
 
 def _table(rows: list[list[str]]) -> str:
@@ -180,13 +186,13 @@ def main(args: argparse.Namespace) -> int:
     measured = [F.measure(d, config.cell_m) for d in data]
     del data, views
     synth_m, real_m = measured[0], measured[1:]
-    excess = {name: F.envelope_excess(synth_m.distance[name], [m.distance[name] for m in real_m])
-              for name in F.DESCRIPTORS}
-    heading_excess = {name: F.envelope_excess(synth_m.heading[name], [m.heading[name] for m in real_m])
-                      for name in F.DESCRIPTORS}
-    same_way_excess = {name: F.envelope_excess(synth_m.distance_same_way[name],
-                                               [m.distance_same_way[name] for m in real_m])
-                       for name in F.DESCRIPTORS}
+    def envelope(curves: str) -> dict[str, tuple[float, int | None]]:
+        """Per descriptor, the envelope excess of the synthetic curves `curves` (a field of
+        `SequenceFidelity`) against the real ones, and its worst bin."""
+        return {name: F.envelope_excess(getattr(synth_m, curves)[name], [getattr(m, curves)[name] for m in real_m])
+                for name in F.DESCRIPTORS}
+
+    excess, heading_excess, same_way_excess = (envelope(c) for c in ("distance", "heading", "distance_same_way"))
     curves_s = time.perf_counter() - started
 
     registered = {m.name for m in list_methods()}
@@ -237,11 +243,11 @@ def main(args: argparse.Namespace) -> int:
     print(_table(rows))
     for name, title in (("sad", "SAD"), ("polar", "polar")):
         value, kb = excess[name]
-        where = "" if kb is None else f" (worst at {synth_m.distance[name].edges[kb]:g}-{synth_m.distance[name].edges[kb + 1]:g} m)"
+        where = _worst(synth_m.distance[name].edges, kb, "m")
         hv, hk = heading_excess[name]
-        hwhere = "" if hk is None else f" (worst at {synth_m.heading[name].edges[hk]:g}-{synth_m.heading[name].edges[hk + 1]:g} deg)"
+        hwhere = _worst(synth_m.heading[name].edges, hk, "deg")
         sv, sk = same_way_excess[name]
-        swhere = "" if sk is None else f" (worst at {synth_m.distance[name].edges[sk]:g}-{synth_m.distance[name].edges[sk + 1]:g} m)"
+        swhere = _worst(synth_m.distance_same_way[name].edges, sk, "m")
         print(f"{title} curve envelope excess: {value:.3f}{where}; pairs driving the same way "
               f"(within {F.SAME_WAY_DEG:g} deg): {sv:.3f}{swhere}; against heading: {hv:.3f}{hwhere}")
     print()
