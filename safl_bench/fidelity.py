@@ -32,7 +32,12 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v2`, the
   method's usual input on the default, the runner's choice), read from result records or run;
   `ranking_tau` is Kendall's tau (scipy) between the methods' synthetic F1max and their mean
-  real F1max.
+  real F1max. A run picks a learned method's weights by the task's source (BiGAN and Stable-AFL
+  ship weights trained on the synthetic default and others trained on real KITTI 02), so with
+  the committed records their ranks compare two trainings as well as two data sets, and on 02
+  the real-KITTI weights see their own training sequence; `mixed_weights` names such methods
+  and the report says so. Records of one set of weights on every task (`safl-bench run
+  --weights FILE`) rank the data alone.
 """
 
 from __future__ import annotations
@@ -386,6 +391,28 @@ class MethodResult:
     f1_max: float | None
     status: str  # "record", "computed", "missing" or "failed"
     note: str = ""
+    #: the weights the record was made with ("file sha256[:12]"; "" for methods without weights)
+    weights: str = ""
+
+
+def weights_label(params: dict[str, Any]) -> str:
+    """'file sha256[:12]' of the weights in a record's method parameters ('' when none)."""
+    w = params.get("weights")
+    if not isinstance(w, dict) or not w.get("sha256"):
+        return ""
+    return f"{Path(str(w.get('path', '?'))).name} {str(w['sha256'])[:12]}"
+
+
+def mixed_weights(results: dict[str, dict[str, MethodResult]]) -> dict[str, dict[str, str]]:
+    """{method: {task: weights}} for the methods whose results on the tasks were made with more
+    than one set of weights (e.g. the synthetic weights on the synthetic task and the real-KITTI
+    ones on real tasks): their rank then compares trainings as well as data."""
+    out = {}
+    for m, per in results.items():
+        used = {t: r.weights for t, r in per.items() if r.f1_max is not None}
+        if len(set(used.values())) > 1:
+            out[m] = used
+    return out
 
 
 def _kendall(x: Sequence[float], y: Sequence[float]) -> float | None:
@@ -448,7 +475,8 @@ def place_recognition(
         if record is None or "single_frame" not in record.results:
             return None
         metrics = record.results["single_frame"].metrics
-        return MethodResult(m, t, metrics.recall_at_1, metrics.f1_max, "record")
+        return MethodResult(m, t, metrics.recall_at_1, metrics.f1_max, "record",
+                            weights=weights_label(record.method.params))
 
     out: dict[str, dict[str, MethodResult]] = {m: {} for m in methods}
     todo: dict[str, list[str]] = {}
@@ -473,5 +501,6 @@ def place_recognition(
                 metrics = rec.results["single_frame"].metrics
                 out[m][outcome.task_id] = MethodResult(
                     m, outcome.task_id, metrics.recall_at_1, metrics.f1_max,
-                    "computed" if outcome.status == "computed" else "record")
+                    "computed" if outcome.status == "computed" else "record",
+                    weights=weights_label(rec.method.params))
     return out

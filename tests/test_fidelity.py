@@ -160,3 +160,26 @@ def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
     taus = F.ranking_tau(pr, "SAFL/Synth00-Revisit-v2", tasks)
     assert taus["SAFL/BEVKITTI02-Revisit-v0"] == pytest.approx(1.0)
     assert taus["SAFL/BEVKITTI00-Revisit-v0"] == pytest.approx(1 / 3)
+
+
+def test_mixed_weights_are_named() -> None:
+    # a learned method run with one set of weights on the synthetic task and another on the real
+    # tasks ranks two trainings, not only two data sets: the fidelity report says which
+    w_syn = {"weights": {"path": "baselines/weights/bigan.safetensors", "sha256": "92061236b6c2" + "0" * 52}}
+    w_bev = {"weights": {"path": "baselines/weights/bigan-bev.safetensors", "sha256": "5aae9d521a8f" + "0" * 52}}
+    assert F.weights_label(w_syn) == "bigan.safetensors 92061236b6c2"
+    assert F.weights_label({"params": {}}) == ""
+
+    def res(m: str, t: str, weights: dict, f1: float | None = 0.8) -> F.MethodResult:
+        return F.MethodResult(m, t, None, f1, "record", weights=F.weights_label(weights))
+
+    results = {
+        "bigan": {"S": res("bigan", "S", w_syn), "R1": res("bigan", "R1", w_bev), "R2": res("bigan", "R2", w_bev)},
+        "stable_afl": {t: res("stable_afl", t, w_syn) for t in ("S", "R1", "R2")},
+        "sad": {t: res("sad", t, {}) for t in ("S", "R1", "R2")},
+        "bevplace": {"S": res("bevplace", "S", w_syn), "R1": res("bevplace", "R1", w_bev, f1=None)},
+    }
+    mixed = F.mixed_weights(results)
+    assert set(mixed) == {"bigan"}  # bevplace's other weights gave no result: nothing ranked with them
+    assert mixed["bigan"] == {"S": "bigan.safetensors 92061236b6c2", "R1": "bigan-bev.safetensors 5aae9d521a8f",
+                              "R2": "bigan-bev.safetensors 5aae9d521a8f"}

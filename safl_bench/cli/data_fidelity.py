@@ -267,6 +267,15 @@ def main(args: argparse.Namespace) -> int:
     notes = sorted({f"{r.method}: {r.note}" for per in pr.values() for r in per.values() if r.note})
     for note in notes:
         print(f"  note: {note}")
+    for m, used in F.mixed_weights(pr).items():
+        groups: dict[str, list[str]] = {}
+        for t, w in used.items():
+            groups.setdefault(w or "no weights", []).append(t.split("/")[-1].split("-")[0])
+        print(f"  note: {m} ran with other weights on other tasks ("
+              + "; ".join(f"{w} on {', '.join(ts)}" for w, ts in groups.items())
+              + "): its rank compares trainings as well as data; for the data alone, run it on the "
+              f"real tasks with the synthetic weights (`safl-bench run --method {m} --weights FILE "
+              "--results DIR ...`) and give --results DIR here")
     print("Kendall tau of F1max, synthetic vs " + ", ".join(
         f"{t.split('/')[-1] if t != 'mean' else 'the real mean'} {_fmt(v)}" for t, v in taus.items()))
     print("goals: " + "; ".join(
