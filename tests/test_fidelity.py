@@ -31,6 +31,19 @@ def test_image_stats_of_hand_made_images() -> None:
     assert st.radial_profile[1] == pytest.approx(0.1 / 16)
 
 
+def test_lateral_occupancy_of_hand_made_images() -> None:
+    # 11 x 11 pixels of 0.4 m, the sensor at pixel (5, 5); a pixel 1.2 m left of it counts, one
+    # 2 m ahead (outside the 0.4 m band) does not; left is a smaller column (BEVPlace's layout)
+    images = np.zeros((1, 11, 11), np.uint8)
+    images[0, 5, 2] = 10
+    images[0, 0, 8] = 10
+    st = F.image_stats(images, resolution_m=0.4, edges_m=(0.0, 1.0), lateral_edges_m=(-2.0, 0.0, 2.0),
+                       band_m=0.4)
+    assert st.lateral_edges_m == [-2.0, 0.0, 2.0]
+    # band: rows 4-6; right bin: columns 6-10 (y -0.4..-2.0 m), left bin: columns 1-5 (y 1.6..0 m)
+    assert st.lateral_occupancy == [pytest.approx(0.0), pytest.approx(1 / 3 / 5)]
+
+
 def test_distance_and_heading_curves_of_hand_made_images() -> None:
     a, b, c = _image(1), _image(2), _image(3)
     a2 = a.copy()

@@ -91,10 +91,12 @@ def _table(rows: list[list[str]]) -> str:
 def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any], tasks: list[str]) -> None:
     import matplotlib
 
+    from safl_bench.fidelity import LATERAL_BAND_M
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 3, figsize=(16, 9))
+    fig, axes = plt.subplots(2, 4, figsize=(21, 9))
     for m in measured:
         synth = m.label == synth_label
         lw = 2.2 if synth else 1.4
@@ -102,6 +104,8 @@ def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any],
         st = m.stats
         mids = (np.asarray(st.radial_edges_m[:-1]) + np.asarray(st.radial_edges_m[1:])) / 2
         axes[0, 0].plot(mids, [np.nan if v is None else v for v in st.radial_profile], label=m.label, **style)
+        lat = (np.asarray(st.lateral_edges_m[:-1]) + np.asarray(st.lateral_edges_m[1:])) / 2
+        axes[0, 3].plot(lat, [np.nan if v is None else v for v in st.lateral_occupancy], label=m.label, **style)
         for col, name in ((1, "sad"), (2, "polar")):
             c = m.distance[name]
             x = (np.asarray(c.edges[:-1]) + np.asarray(c.edges[1:])) / 2
@@ -119,17 +123,13 @@ def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any],
         axes[0, col].axhline(1.0, color="grey", lw=0.6)
         axes[1, col - 1].set(title=f"{name.split(' (')[0]}: vs heading difference, pairs within 3 m",
                              xlabel="heading difference (deg)", ylabel="median difference / median beyond 100 m")
-    ax = axes[1, 2]
-    methods = sorted(pr)
-    width = 0.8 / max(1, len(tasks))
-    for k, task in enumerate(tasks):
-        vals = [np.nan if pr[m].get(task) is None or pr[m][task].f1_max is None else pr[m][task].f1_max
-                for m in methods]
-        ax.bar(np.arange(len(methods)) + k * width, vals, width, label=task.split("/")[-1])
-    ax.set_xticks(np.arange(len(methods)) + width * (len(tasks) - 1) / 2, methods)
-    ax.set(title="single-frame F1max, revisit protocol", ylim=(0, 1))
+    axes[0, 3].set(title=f"lateral occupancy (within {LATERAL_BAND_M:g} m ahead and behind)",
+                   xlabel="m left of the sensor (negative: right)", ylabel="share of non-zero pixels")
+    _plot_ranking(axes[1, 2], pr, tasks)
+    axes[1, 3].axis("off")
     for a in axes.ravel():
-        a.legend(fontsize=7)
+        if a.get_legend_handles_labels()[0]:
+            a.legend(fontsize=7)
     fig.tight_layout()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -138,6 +138,18 @@ def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any],
         raise DataError(f"cannot write {path}: {exc}") from exc
     finally:
         plt.close(fig)
+
+
+def _plot_ranking(ax: Any, pr: dict[str, Any], tasks: list[str]) -> None:
+    """Bars of the methods' single-frame F1max per task."""
+    methods = sorted(pr)
+    width = 0.8 / max(1, len(tasks))
+    for k, task in enumerate(tasks):
+        vals = [np.nan if pr[m].get(task) is None or pr[m][task].f1_max is None else pr[m][task].f1_max
+                for m in methods]
+        ax.bar(np.arange(len(methods)) + k * width, vals, width, label=task.split("/")[-1])
+    ax.set_xticks(np.arange(len(methods)) + width * (len(tasks) - 1) / 2, methods)
+    ax.set(title="single-frame F1max, revisit protocol", ylim=(0, 1))
 
 
 def main(args: argparse.Namespace) -> int:
@@ -224,6 +236,13 @@ def main(args: argparse.Namespace) -> int:
     for k in range(0, len(edges) - 1, 2):
         rows.append([f"mean value at {edges[k]:g}-{edges[k + 1]:g} m",
                      *[_fmt(m.stats.radial_profile[k], digits=4) for m in order]])
+    lat = synth_m.stats.lateral_edges_m
+    for k in range(len(lat) - 1):
+        if abs(lat[k]) <= 12 and abs(lat[k + 1]) <= 12:
+            side = "left" if lat[k] >= 0 else "right"
+            lo, hi = sorted((abs(lat[k]), abs(lat[k + 1])))
+            rows.append([f"non-zero {lo:g}-{hi:g} m {side}",
+                         *[_fmt(m.stats.lateral_occupancy[k], pct=True) for m in order]])
     for name, title in (("sad", "SAD"), ("polar", "polar")):
         c_edges = synth_m.distance[name].edges
         for k in range(len(c_edges) - 1):
