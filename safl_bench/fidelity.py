@@ -8,8 +8,8 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
 - image statistics: the share of non-zero pixels, the mean non-zero value (in [0, 1]), and the
   radial profile, the mean value of the pixels in 2 m rings around the sensor pixel; and the
   lateral occupancy, the share of non-zero pixels in 2 m bands left and right of the sensor
-  (within `LATERAL_BAND_M` ahead and behind): where the roadside stands (on KITTI 00 its peaks
-  are about 5 m either side, with nothing within about 2.5 m);
+  (within `LATERAL_BAND_M` ahead and behind): where the roadside stands (on KITTI 00 and 02
+  each side peaks 4-8 m out, at 25-34 % of the pixels, with 1-8 % within 2 m);
 - difficulty curves: the median descriptor difference of two frames against the distance
   between their positions (2 m bins, 0-40 m), divided by the median difference of the frame
   pairs more than `FAR_M` (100 m) apart, so 1 means "as different as unrelated places". Every
@@ -421,8 +421,10 @@ class MethodResult:
 def weights_label(params: dict[str, Any]) -> str:
     """'file sha256[:12]' of the weights in a record's method parameters ('' when none)."""
     w = params.get("weights")
-    if not isinstance(w, dict) or not w.get("sha256"):
+    if not isinstance(w, dict):
         return ""
+    if not w.get("sha256"):
+        return str(w.get("source", ""))  # "untrained"
     return f"{Path(str(w.get('path', '?'))).name} {str(w['sha256'])[:12]}"
 
 

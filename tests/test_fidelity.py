@@ -182,6 +182,7 @@ def test_mixed_weights_are_named() -> None:
     w_bev = {"weights": {"path": "baselines/weights/bigan-bev.safetensors", "sha256": "5aae9d521a8f" + "0" * 52}}
     assert F.weights_label(w_syn) == "bigan.safetensors 92061236b6c2"
     assert F.weights_label({"params": {}}) == ""
+    assert F.weights_label({"weights": {"source": "untrained"}}) == "untrained"
 
     def res(m: str, t: str, weights: dict, f1: float | None = 0.8) -> F.MethodResult:
         return F.MethodResult(m, t, None, f1, "record", weights=F.weights_label(weights))
