@@ -40,7 +40,7 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   the committed records their ranks compare two trainings as well as two data sets, and on 02
   the real-KITTI weights see their own training sequence; `mixed_weights` names such methods
   and the report says so. Records of one set of weights on every task (`safl-bench run
-  --weights FILE`) rank the data alone.
+  --weights FILE`, or the cells `place_recognition` runs itself) rank the data alone.
 """
 
 from __future__ import annotations
@@ -428,6 +428,13 @@ def weights_label(params: dict[str, Any]) -> str:
     return f"{Path(str(w.get('path', '?'))).name} {str(w['sha256'])[:12]}"
 
 
+def result_of(record: Any, status: str = "record") -> MethodResult:
+    """A record's single-frame Recall@1 and F1max, with the weights it was made with."""
+    metrics = record.results["single_frame"].metrics
+    return MethodResult(record.method.name, record.task.id, metrics.recall_at_1, metrics.f1_max, status,
+                        weights=weights_label(record.method.params))
+
+
 def mixed_weights(results: dict[str, dict[str, MethodResult]]) -> dict[str, dict[str, str]]:
     """{method: {task: weights}} for the methods whose results on the tasks were made with more
     than one set of weights (e.g. the synthetic weights on the synthetic task and the real-KITTI
@@ -481,7 +488,10 @@ def place_recognition(
     """{method: {task: result}} from the records under `results_dir` (and `extra_record_dirs`),
     running the missing cells with the runner (records written to `results_dir`) when `run`,
     except for the methods in `skip_run` (too slow on a CPU: BEVPlace takes about a second a
-    frame here), which are only read."""
+    frame here), which are only read. The cells run here use one instance of each method, with
+    the weights it picks for the synthetic default, on every task (unlike `safl-bench run`, which
+    picks them by each task's source): their ranks compare the data alone, and their records say
+    which weights they hold."""
     from safl_bench.method_registry import make_method
     from safl_bench.records import load_records
     from safl_bench.runner import RunOptions, run_grid
@@ -499,9 +509,7 @@ def place_recognition(
         record = by_key.get(key)
         if record is None or "single_frame" not in record.results:
             return None
-        metrics = record.results["single_frame"].metrics
-        return MethodResult(m, t, metrics.recall_at_1, metrics.f1_max, "record",
-                            weights=weights_label(record.method.params))
+        return result_of(record)
 
     out: dict[str, dict[str, MethodResult]] = {m: {} for m in methods}
     todo: dict[str, list[str]] = {}
@@ -523,9 +531,5 @@ def place_recognition(
                 if outcome.status == "failed" or rec is None:
                     out[m][outcome.task_id] = MethodResult(m, outcome.task_id, None, None, "failed", outcome.message)
                     continue
-                metrics = rec.results["single_frame"].metrics
-                out[m][outcome.task_id] = MethodResult(
-                    m, outcome.task_id, metrics.recall_at_1, metrics.f1_max,
-                    "computed" if outcome.status == "computed" else "record",
-                    weights=weights_label(rec.method.params))
+                out[m][outcome.task_id] = result_of(rec, "computed" if outcome.status == "computed" else "record")
     return out

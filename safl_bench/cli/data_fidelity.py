@@ -88,6 +88,12 @@ def _table(rows: list[list[str]]) -> str:
     return "\n".join(lines)
 
 
+def _xy(edges: list[float], values: list[float | None]) -> tuple[np.ndarray, list[float]]:
+    """Bin centres of `edges` and `values` with NaN for bins without a value, for plotting."""
+    mids = (np.asarray(edges[:-1]) + np.asarray(edges[1:])) / 2
+    return mids, [np.nan if v is None else v for v in values]
+
+
 def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any], tasks: list[str]) -> None:
     import matplotlib
 
@@ -102,20 +108,14 @@ def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any],
         lw = 2.2 if synth else 1.4
         style: dict[str, Any] = {"color": "k", "lw": lw} if synth else {"lw": lw}
         st = m.stats
-        mids = (np.asarray(st.radial_edges_m[:-1]) + np.asarray(st.radial_edges_m[1:])) / 2
-        axes[0, 0].plot(mids, [np.nan if v is None else v for v in st.radial_profile], label=m.label, **style)
-        lat = (np.asarray(st.lateral_edges_m[:-1]) + np.asarray(st.lateral_edges_m[1:])) / 2
-        axes[0, 3].plot(lat, [np.nan if v is None else v for v in st.lateral_occupancy], label=m.label, **style)
+        axes[0, 0].plot(*_xy(st.radial_edges_m, st.radial_profile), label=m.label, **style)
+        axes[0, 3].plot(*_xy(st.lateral_edges_m, st.lateral_occupancy), label=m.label, **style)
         for col, name in ((1, "sad"), (2, "polar")):
-            c = m.distance[name]
-            x = (np.asarray(c.edges[:-1]) + np.asarray(c.edges[1:])) / 2
-            line, = axes[0, col].plot(x, [np.nan if v is None else v for v in c.values], marker=".", label=m.label, **style)
-            same_way = m.distance_same_way[name]
-            axes[0, col].plot(x, [np.nan if v is None else v for v in same_way.values], ls="--",
-                              color=line.get_color(), lw=lw * 0.7, label=f"{m.label}, same way")
-            h = m.heading[name]
-            x = (np.asarray(h.edges[:-1]) + np.asarray(h.edges[1:])) / 2
-            axes[1, col - 1].plot(x, [np.nan if v is None else v for v in h.values], marker="o", label=m.label, **style)
+            c, same_way, h = m.distance[name], m.distance_same_way[name], m.heading[name]
+            line, = axes[0, col].plot(*_xy(c.edges, c.values), marker=".", label=m.label, **style)
+            axes[0, col].plot(*_xy(same_way.edges, same_way.values), ls="--", color=line.get_color(),
+                              lw=lw * 0.7, label=f"{m.label}, same way")
+            axes[1, col - 1].plot(*_xy(h.edges, h.values), marker="o", label=m.label, **style)
     axes[0, 0].set(title="radial profile: mean value by distance", xlabel="m from the sensor", ylabel="mean value")
     for col, name in ((1, "SAD (central 128 x 128)"), (2, "polar (20 x 60, shift-invariant)")):
         axes[0, col].set(title=f"{name}: difference vs distance", xlabel="distance between frames (m)",
