@@ -10,7 +10,9 @@ import pytest
 
 from safl_bench import synth
 from safl_bench.cli import main as cli_main
-from safl_bench.synth.routes import revisit_kinds
+from safl_bench.errors import ConfigError
+from safl_bench.synth.routes import plan_trajectory, revisit_kinds, walk_revisits
+from safl_bench.synth.streets import make_street_grid
 
 # A tiny, coarse sequence: 2x2 streets, 6 frames, a 64 x 180 sensor.
 TINY = synth.SynthConfig(frames=6, grid_lines=2, azimuth_res_deg=2.0)
@@ -104,10 +106,28 @@ def test_default_test_routes_revisit(name: str) -> None:
     speed = np.linalg.norm(np.diff(xy, axis=0), axis=1) * 10
     assert 7.0 < speed.mean() < 12.0 and speed.max() < 14.0
     same, opposite = revisit_kinds(xy, heading, scene.trajectory.times)
-    if name == "00":
-        assert same.sum() > 20 and opposite.sum() > 20
-    else:
-        assert same.sum() + opposite.sum() > 20
+    if name == "00":  # KITTI 00's kind: the same way only
+        assert same.sum() > 20 and opposite.sum() == 0
+    else:  # KITTI 08's kind: the opposite way
+        assert opposite.sum() > 20
+
+
+@pytest.mark.parametrize("revisits", ["same", "opposite", "both"])
+def test_route_revisit_kinds(revisits: str) -> None:
+    """A route drives again what its `revisits` asks for, and "same" never the opposite way."""
+    grid = make_street_grid(4, np.random.default_rng(3))
+    for seed in range(3):
+        traj = plan_trajectory(grid, 900, np.random.default_rng(seed),
+                               wander_rng=np.random.default_rng(seed), revisits=revisits)
+        same, opposite = walk_revisits(list(traj.nodes))
+        assert {"same": same and not opposite, "opposite": opposite, "both": same and opposite}[revisits]
+
+
+def test_route_revisit_kind_unknown() -> None:
+    grid = make_street_grid(3, np.random.default_rng(0))
+    with pytest.raises(ConfigError, match=r"'same'.*'backwards'"):
+        plan_trajectory(grid, 50, np.random.default_rng(0), wander_rng=np.random.default_rng(0),
+                        revisits="backwards")
 
 
 def test_default_sequence_lengths() -> None:

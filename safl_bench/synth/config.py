@@ -15,12 +15,13 @@ from safl_bench.errors import ConfigError
 
 #: Bumped whenever the generator's output changes for the same seed and config. Version "1" was
 #: the data of the synthetic tasks' task version v0 (e.g. SAFL/Synth00-T1R1-v0), version "2" that
-#: of v1; version "3" is that of v2. A bump needs new synthetic task versions in
-#: `safl_bench.tasks.builtin`.
-GENERATOR_VERSION = "3"
+#: of v1, version "3" that of v2; version "4" is that of v3. A bump needs new synthetic task
+#: versions in `safl_bench.tasks.builtin`.
+GENERATOR_VERSION = "4"
 
 DEFAULT_SEED = 0
-#: Test sequences, in the roles of KITTI 00 and 09.
+#: Test sequences: 00 in the role of KITTI 00 (revisits driving the same way), 09 in that of
+#: KITTI 08 (revisits driving the opposite way; `synth.routes` says why).
 TEST_SEQUENCES: tuple[str, ...] = ("00", "09")
 #: Training sequences, in the roles of KITTI 01-08.
 TRAIN_SEQUENCES: tuple[str, ...] = ("01", "02", "03", "04")
@@ -34,14 +35,16 @@ class SequenceSpec:
     frames: int
     #: number of street lines in each direction of the (warped) street grid
     grid_lines: int
-    #: revisits the route must have: "both" (same and opposite direction), "any", "none"
+    #: revisits the route must have (`synth.routes.REVISITS`): "same" (some street driven again
+    #: the same way, none the opposite way), "opposite" (some street driven again the opposite
+    #: way), "both", "any", "none"
     revisits: str
 
 
 #: Default lengths: ~1400 frames (140 s) for the main test sequence, like a short KITTI 00.
 SEQUENCE_SPECS: dict[str, SequenceSpec] = {
-    "00": SequenceSpec(frames=1400, grid_lines=5, revisits="both"),
-    "09": SequenceSpec(frames=800, grid_lines=4, revisits="any"),
+    "00": SequenceSpec(frames=1400, grid_lines=5, revisits="same"),
+    "09": SequenceSpec(frames=800, grid_lines=4, revisits="opposite"),
     "01": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
     "02": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
     "03": SequenceSpec(frames=350, grid_lines=4, revisits="none"),

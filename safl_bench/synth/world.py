@@ -42,6 +42,8 @@ TERRAIN: dict[str, tuple[tuple[float, float], tuple[float, float], tuple[float, 
     "open": ((0.03, 0.15), (0.0, 3.0), (1.0, 4.0)),
 }
 TERRAIN_P = 0.85
+#: Share of street sides (between two crossings) with cars parked along the kerb.
+PARKING_P = 0.9
 
 
 @dataclass
@@ -318,7 +320,7 @@ class _Town:
                         self.tree(u, v, scale=0.85)
                 if rng.random() < 0.85:  # bushes and hedges along the block's edge
                     self.verge(vertical, a0, a1, x + side * (half + walk), side)
-                if a1 - a0 > 25 and rng.random() < 0.9:  # parked cars along the kerb
+                if a1 - a0 > 25 and rng.random() < PARKING_P:  # parked cars along the kerb
                     a = a0 + rng.uniform(6, 10)
                     while a < a1 - 10:
                         if rng.random() < 0.85:
