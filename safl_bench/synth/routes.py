@@ -50,8 +50,9 @@ REVISITS = ("both", "same", "opposite", "any", "none")
 #: keeps the vehicle (roof 0.85 m either side of the sensor) clear of cars parked on the narrowest
 #: streets (their left side 2.5 m right of the centre line, the lane centre 1.6 m); the left end
 #: keeps it in its half of the road. A same-direction revisit's lateral offset on sequence 00
-#: then has a median of 0.20 m and a 90th percentile of 0.29 m (seed 0), 0.14-0.72 m and
-#: 0.9-1.4 m (seeds 1-4); KITTI 00: 0.14 / 0.94 m, 02: 0.79 / 1.14 m (pooled 0.20 / 1.11 m).
+#: then has a median of 0.18 m and a 90th percentile of 0.87 m (seed 0), 0.22-0.85 m and
+#: 0.5-1.7 m (seeds 1-4); KITTI 00: 0.14 / 0.94 m, 02: 0.79 / 1.14 m (pooled 0.20 / 1.11 m).
+#: (Data version 3, whose 00 also drove streets the other way: 0.20 / 0.29 m on seed 0.)
 WANDER_MEAN_M = -0.1
 WANDER_SD_M = 0.12
 WANDER_SHIFT_P = 0.3
