@@ -160,7 +160,7 @@ def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
     f1 = {"sad": (0.9, 0.8, 0.5), "bigan": (0.95, 0.9, 0.7), "stable_afl": (0.97, 0.85, 0.72)}
     for method, (s, r0, r2) in f1.items():
         write_record(extra, make_record(method, protocol="revisit", condition=None, f1=s, recall_at_1=0.5,
-                                        task_version=2))
+                                        task_version=3))
         for seq, v in (("00", r0), ("02", r2)):
             write_record(results, make_record(method, protocol="revisit", condition=None, sequence=seq,
                                               source_kind="bev", f1=v, recall_at_1=0.8))

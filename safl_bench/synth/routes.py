@@ -212,9 +212,10 @@ def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
                     rate_hz: float = 10.0) -> Trajectory:
     """Poses of `frames` scans at `rate_hz` along a random route through `grid`.
 
-    `revisits` is "both" (drive some street again in the same and in the opposite direction),
-    "any" (one of the two) or "none". `wander_rng` draws the lateral wander in the lane
-    (`lane_wander`); `rng` everything else.
+    `revisits` is "same" (drive some street again the same way and none the opposite way),
+    "opposite" (drive some street again the opposite way), "both" (both kinds), "any" (one of
+    the two) or "none". `wander_rng` draws the lateral wander in the lane (`lane_wander`); `rng`
+    everything else.
     """
     if revisits not in REVISITS:
         raise ConfigError(f"revisits must be one of {', '.join(map(repr, REVISITS))}, got {revisits!r}")
