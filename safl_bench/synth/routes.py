@@ -30,6 +30,7 @@ wander is drawn from its own generator, so a seed's town and walk are those of v
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,8 +41,16 @@ from safl_bench.synth.world import LANE_OFFSET_M
 
 _DIRS = ((1, 0), (0, 1), (-1, 0), (0, -1))  # east, north, west, south in plan grid steps
 TURN_RADIUS_M = 9.0
-#: What a route must revisit (`plan_trajectory`).
-REVISITS = ("both", "same", "opposite", "any", "none")
+#: What a route must revisit (`plan_trajectory`): each kind's test on whether the walk drives some
+#: street again the same way and the opposite way (`walk_revisits`).
+REVISIT_TESTS: dict[str, Callable[[bool, bool], bool]] = {
+    "both": lambda same, opposite: same and opposite,
+    "same": lambda same, opposite: same and not opposite,
+    "opposite": lambda same, opposite: opposite,
+    "any": lambda same, opposite: same or opposite,
+    "none": lambda same, opposite: True,
+}
+REVISITS = tuple(REVISIT_TESTS)
 #: Lateral position in the lane (positive: right of the lane centre): on each street driven the
 #: vehicle keeps to the lane centre or, with probability `WANDER_SHIFT_P`, to a line
 #: `WANDER_SHIFT_M` further left (around parked cars and cyclists, another lane), plus a small
@@ -221,10 +230,7 @@ def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
         raise ConfigError(f"revisits must be one of {', '.join(map(repr, REVISITS))}, got {revisits!r}")
 
     def accept(w: list[tuple[int, int]]) -> bool:
-        same, opposite = walk_revisits(w)
-        return {"both": same and opposite, "same": same and not opposite,
-                "opposite": opposite, "any": same or opposite,
-                "none": True}[revisits]
+        return REVISIT_TESTS[revisits](*walk_revisits(w))
 
     nu, nv = len(grid.u_lines), len(grid.v_lines)
     if nu < 2 or nv < 2:
