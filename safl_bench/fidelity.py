@@ -32,7 +32,7 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   some side are skipped;
 - place recognition (`place_recognition`): Recall@1 and F1max of single-frame matching (the
   descriptor's own nearest neighbour) of every top-view method on the revisit protocol, real
-  (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v3`, the
+  (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v4`, the
   method's usual input on the default, the runner's choice), read from result records or run;
   `ranking_tau` is Kendall's tau (scipy) between the methods' synthetic F1max and their mean
   real F1max. A run picks a learned method's weights by the task's source (BiGAN and Stable-AFL

@@ -63,7 +63,7 @@ def test_explain_without_a_record_names_the_run_command(tiny_task, kitti_root, t
 
 
 def test_run_command_quotes_what_needs_it() -> None:
-    assert explain.run_command("sad", "SAFL/Synth00-T1R1-v3") == \
-        "safl-bench run --method sad --task SAFL/Synth00-T1R1-v3"
+    assert explain.run_command("sad", "SAFL/Synth00-T1R1-v4") == \
+        "safl-bench run --method sad --task SAFL/Synth00-T1R1-v4"
     assert explain.run_command("sad", "X", results="my results") == \
         "safl-bench run --method sad --task X --results 'my results'"

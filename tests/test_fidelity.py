@@ -160,17 +160,17 @@ def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
     f1 = {"sad": (0.9, 0.8, 0.5), "bigan": (0.95, 0.9, 0.7), "stable_afl": (0.97, 0.85, 0.72)}
     for method, (s, r0, r2) in f1.items():
         write_record(extra, make_record(method, protocol="revisit", condition=None, f1=s, recall_at_1=0.5,
-                                        task_version=3))
+                                        task_version=4))
         for seq, v in (("00", r0), ("02", r2)):
             write_record(results, make_record(method, protocol="revisit", condition=None, sequence=seq,
                                               source_kind="bev", f1=v, recall_at_1=0.8))
     tasks = ["SAFL/BEVKITTI00-Revisit-v0", "SAFL/BEVKITTI02-Revisit-v0"]
-    pr = F.place_recognition(["sad", "bigan", "stable_afl", "bevplace"], "SAFL/Synth00-Revisit-v3", tasks,
+    pr = F.place_recognition(["sad", "bigan", "stable_afl", "bevplace"], "SAFL/Synth00-Revisit-v4", tasks,
                              results_dir=results, extra_record_dirs=[extra], run=False)
     assert pr["sad"]["SAFL/BEVKITTI02-Revisit-v0"].f1_max == pytest.approx(0.25)  # single-frame: f1 * 0.5
-    assert pr["bigan"]["SAFL/Synth00-Revisit-v3"].recall_at_1 == pytest.approx(0.25)
+    assert pr["bigan"]["SAFL/Synth00-Revisit-v4"].recall_at_1 == pytest.approx(0.25)
     assert pr["bevplace"]["SAFL/BEVKITTI00-Revisit-v0"].status == "missing"
-    taus = F.ranking_tau(pr, "SAFL/Synth00-Revisit-v3", tasks)
+    taus = F.ranking_tau(pr, "SAFL/Synth00-Revisit-v4", tasks)
     assert taus["SAFL/BEVKITTI02-Revisit-v0"] == pytest.approx(1.0)
     assert taus["SAFL/BEVKITTI00-Revisit-v0"] == pytest.approx(1 / 3)
 

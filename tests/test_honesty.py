@@ -72,11 +72,11 @@ def test_trained_network_beats_its_untrained_encoder(small_benchmark: Path, name
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["bigan", "stable_afl"])
 def test_shipped_weights_beat_the_untrained_network_on_the_default(name: str) -> None:
-    """The shipped weights against the same network untrained on SAFL/Synth00-T1R1-v3 (single
+    """The shipped weights against the same network untrained on SAFL/Synth00-T1R1-v4 (single
     frame ROC AUC; generates the default's sequence 00 when missing, about a minute)."""
     from safl_bench.method_registry import make_method
 
-    task = tasks.make("SAFL/Synth00-T1R1-v3", progress=False)
+    task = tasks.make("SAFL/Synth00-T1R1-v4", progress=False)
     shipped = _single_frame_auc(make_method(name, source="synth"), task)
     untrained = _single_frame_auc(make_method(name, weights="untrained", source="synth"), task)
     assert shipped > untrained + 0.05, (shipped, untrained)

@@ -160,11 +160,11 @@ def test_records_built_from_a_task_spec_and_an_evaluation(tmp_path: Path) -> Non
     assert result.metrics.auc == pytest.approx(evaluation.roc_auc)
     assert result.metrics.n_positives == 500
     assert len(result.curves.pr.recall) <= MAX_CURVE_POINTS
-    paper = task_info(spec("SAFL/Synth00-T1R1-v3"), "synthetic default (seed 0)", data="abc")
-    assert (paper.protocol, paper.condition, paper.version) == ("paper", "T1R1", 3)
-    assert paper.spec["data_version"] == "4"
+    paper = task_info(spec("SAFL/Synth00-T1R1-v4"), "synthetic default (seed 0)", data="abc")
+    assert (paper.protocol, paper.condition, paper.version) == ("paper", "T1R1", 4)
+    assert paper.spec["data_version"] == "5"
     assert paper.spec["data"] == "abc" and paper.spec_fingerprint == paper.spec["fingerprint"]
-    revisit = task_info(spec("SAFL/Synth00-Revisit-v3"), "synthetic default (seed 0)")
+    revisit = task_info(spec("SAFL/Synth00-Revisit-v4"), "synthetic default (seed 0)")
     assert revisit.condition is None and revisit.protocol == "revisit"
     record = new_record(
         method=MethodInfo("sad", "1", {"size": 32}),

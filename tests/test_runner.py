@@ -128,7 +128,7 @@ def test_cli_run_matcher_settings_are_used_and_recorded(tiny_tasks, kitti_root, 
 
 def test_cli_run_bad_input_is_one_line(tiny_tasks, tmp_path, capsys):
     assert main(["run", "--method", "nope", "--results", str(tmp_path)]) == 2
-    assert main(["run", "--method", "sad", "--task", "SAFL/Synth00-T3R1-v3"]) == 2
+    assert main(["run", "--method", "sad", "--task", "SAFL/Synth00-T3R1-v4"]) == 2
     assert main(["run", "--method", "sad", "--param", "oops"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and all(line.startswith("safl-bench: error:") for line in err)
@@ -139,9 +139,9 @@ def test_resolve_tasks_expands_suites():
     assert len(paper) == 12 and all(t.startswith("SAFL/Synth00-") for t in paper)
     kitti = runner.resolve_tasks(["paper"], source="kitti")
     assert all(t.startswith("SAFL/KITTI00-") for t in kitti)
-    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v3", "paper"])
-    assert mixed[0] == "SAFL/Synth00-T1R1-v3" and len(mixed) == 12
-    assert all(t.endswith("-v3") for t in paper)
+    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v4", "paper"])
+    assert mixed[0] == "SAFL/Synth00-T1R1-v4" and len(mixed) == 12
+    assert all(t.endswith("-v4") for t in paper)
 
 
 def test_the_views_of_all_cells_are_rendered_in_one_pass(tiny_tasks, kitti_root, tmp_path, monkeypatch):

@@ -230,3 +230,40 @@ def test_the_vehicle_wanders_in_its_lane() -> None:
         v = traj.xy[j] - traj.xy[i]
         lateral.append(abs(-np.sin(traj.heading[i]) * v[0] + np.cos(traj.heading[i]) * v[1]))
     assert len(lateral) > 20 and np.median(lateral) > 0.05  # data version 2: 0.00
+
+
+def test_a_parked_car_is_seen_through_its_windows() -> None:
+    """Beams pass a parked car's windows and return from inside it (data version 5), as on real
+    KITTI, where parked cars fill their footprint in BEVPlace's images; a solid box returned only
+    from its outside. Its top is shaped (bonnet and boot below the roof)."""
+    from safl_bench.bevdensity import density_counts
+    from safl_bench.mapconfig import bev_density_config
+    from safl_bench.synth import materials as M
+    from safl_bench.synth.lidar import Lidar
+    from safl_bench.synth.world import World, _Plan, _Town
+
+    cfg = synth.SynthConfig()
+    inside, filled = [], []
+    for seed in range(3):
+        plan = _Plan(60.0, 60.0, 0.2)
+        town = _Town(None, plan, np.random.default_rng(seed))  # type: ignore[arg-type]  # no streets
+        town.car(True, 30.0, 36.0)  # along y at x = 36 m: 6 m ahead of a sensor at (30, 30) m
+        car = (plan.tm == M.CAR) | (plan.tm == M.GLASS)
+        assert (plan.tm == M.GLASS).sum() > 0.3 * car.sum()
+        assert np.ptp(plan.top[car]) > 0.5  # bonnet and boot lie well below the roof
+        world = World(0.2, plan.g, plan.gm, plan.top, plan.tm, plan.lo, plan.hi, plan.fm,
+                      None)  # type: ignore[arg-type]
+        pose = np.eye(4)
+        pose[:3, 3] = (30.0, 30.0, float(plan.g[150, 150]) + cfg.sensor_height_m)
+        pts = Lidar(cfg, np.random.default_rng(1)).scan(world, pose, key=3, azimuth_offset=0.0)
+        xyz = pts[:, :3] + pose[:3, 3]
+        ix, iy = (xyz[:, 0] / 0.2).astype(int), (xyz[:, 1] / 0.2).astype(int)
+        on_car = car[iy, ix]
+        # returns from within the car's volume: more than 0.15 m below its top there
+        inside.append(int((on_car & (xyz[:, 2] < plan.top[iy, ix] - 0.15)).sum()))
+        counts = density_counts(pts, bev_density_config())
+        c0 = (counts.shape[0] - 1) // 2
+        footprint = counts[c0 - 17:c0 - 12, c0 - 5:c0 + 6]  # 5.1-6.9 m ahead, 2 m either side
+        filled.append((footprint > 0).mean())
+    assert min(inside) > 20
+    assert np.mean(filled) > 0.6  # a solid box: 0.58 (of the footprint's pixels, 6 m ahead)

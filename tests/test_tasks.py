@@ -49,15 +49,15 @@ def temp_register() -> Iterator[Callable[..., TaskSpec]]:
 
 def test_builtin_suites_cover_the_paper_and_revisit() -> None:
     paper = tasks.suite("paper", source="synth")
-    assert paper == [f"SAFL/Synth00-{c.name}-v3" for c in PAPER_CONDITIONS]
+    assert paper == [f"SAFL/Synth00-{c.name}-v4" for c in PAPER_CONDITIONS]
     full_kitti = tasks.suite("paper-full", source="kitti")
     for seq in ("00", "09"):
         assert [f"SAFL/KITTI{seq}-{c.name}-v0" for c in PAPER_CONDITIONS] == [
             i for i in full_kitti if i.startswith(f"SAFL/KITTI{seq}")
         ]
     assert set(tasks.suite("revisit")) == {
-        "SAFL/Synth00-Revisit-v3",
-        "SAFL/Synth09-Revisit-v3",
+        "SAFL/Synth00-Revisit-v4",
+        "SAFL/Synth09-Revisit-v4",
         "SAFL/KITTI00-Revisit-v0",
         "SAFL/KITTI05-Revisit-v0",
         "SAFL/KITTI08-Revisit-v0",
@@ -71,7 +71,7 @@ def test_builtin_suites_cover_the_paper_and_revisit() -> None:
         30.0,
         CLEAN,
     )
-    spec = tasks.spec("SAFL/Synth09-T20R2-v3")
+    spec = tasks.spec("SAFL/Synth09-T20R2-v4")
     assert (spec.condition, spec.step, spec.tp_radius_m, spec.window_s) == (
         Condition(20, 2),
         4,
@@ -105,8 +105,8 @@ def test_unknown_ids_suggest_close_ones() -> None:
         tasks.spec("SAFL/KITI00-T5R1.5-v0")
     with pytest.raises(RegistryError, match="unknown task"):
         tasks.make("nothing like it")
-    with pytest.raises(RegistryError, match="no version v4; registered versions: v0, v1, v2, v3"):
-        tasks.spec("SAFL/Synth00-T1R1-v4")
+    with pytest.raises(RegistryError, match="no version v5; registered versions: v0, v1, v2, v3, v4"):
+        tasks.spec("SAFL/Synth00-T1R1-v5")
 
 
 def test_duplicates_versions_and_fingerprints(temp_register: Callable[..., TaskSpec]) -> None:
@@ -138,24 +138,28 @@ SYNTH_T1R1_V0 = "27a410ed7134eecf"
 SYNTH_T1R1_V1 = "fa985fbdcacbb498"
 #: ... nor that of v2, on data version "3" (commit c4f33da).
 SYNTH_T1R1_V2 = "e9fbed849f9b9d5c"
+#: ... nor that of v3, on data version "4" (commit 4bda4bb).
+SYNTH_T1R1_V3 = "b9607d4916279bcc"
 
 
 def test_synthetic_tasks_name_their_data_version_in_the_fingerprint() -> None:
     from safl_bench.synth import GENERATOR_VERSION
 
     assert TASK_VERSION["synth"] == max(SYNTH_DATA_VERSIONS)
-    assert SYNTH_DATA_VERSIONS[TASK_VERSION["synth"]] == GENERATOR_VERSION == "4"
-    old, mid, v2, new = (tasks.registry[f"SAFL/Synth00-T1R1-v{v}"] for v in (0, 1, 2, 3))
-    assert (old.data_version, mid.data_version, v2.data_version, new.data_version) == ("1", "2", "3", "4")
-    assert new.definition()["data_version"] == "4" and new.to_dict()["data_version"] == "4"
+    assert SYNTH_DATA_VERSIONS[TASK_VERSION["synth"]] == GENERATOR_VERSION == "5"
+    old, mid, v2, v3, new = (tasks.registry[f"SAFL/Synth00-T1R1-v{v}"] for v in (0, 1, 2, 3, 4))
+    assert (old.data_version, mid.data_version, v2.data_version, v3.data_version,
+            new.data_version) == ("1", "2", "3", "4", "5")
+    assert new.definition()["data_version"] == "5" and new.to_dict()["data_version"] == "5"
+    assert v3.definition()["data_version"] == "4" and v3.fingerprint == SYNTH_T1R1_V3
     assert v2.definition()["data_version"] == "3" and v2.fingerprint == SYNTH_T1R1_V2
     assert mid.definition()["data_version"] == "2"
     assert "data_version" not in old.definition()  # v0 predates the field: its print stays
     assert old.fingerprint == SYNTH_T1R1_V0 and mid.fingerprint == SYNTH_T1R1_V1
-    assert len({old.fingerprint, mid.fingerprint, v2.fingerprint, new.fingerprint}) == 4
+    assert len({old.fingerprint, mid.fingerprint, v2.fingerprint, v3.fingerprint, new.fingerprint}) == 5
     assert {k: v for k, v in new.definition().items() if k != "data_version"} == old.definition()
     for superseded_id in superseded():
-        current = superseded_id.rsplit("-v", 1)[0] + "-v3"
+        current = superseded_id.rsplit("-v", 1)[0] + "-v4"
         assert tasks.registry[current].fingerprint != tasks.registry[superseded_id].fingerprint
     # a synthetic task registered without one is on the data this safl-bench generates
     assert TaskSpec(id="Test/A-v0", source="synth", sequence="00").data_version == GENERATOR_VERSION
@@ -176,30 +180,32 @@ def test_real_data_fingerprints_are_unchanged() -> None:
 def test_suites_hold_only_the_current_synthetic_version() -> None:
     assert sorted(superseded()) == sorted(
         i for i, s in tasks.registry.items()
-        if i.startswith("SAFL/Synth") and s.version in (0, 1, 2))
-    assert len(superseded()) == 84  # 3 old versions x (2 x (12 conditions + T0R0) + 2 revisit)
+        if i.startswith("SAFL/Synth") and s.version in (0, 1, 2, 3))
+    assert len(superseded()) == 112  # 4 old versions x (2 x (12 conditions + T0R0) + 2 revisit)
     for name in tasks.SUITES:
         ids = tasks.suite(name)
         assert not set(ids) & set(superseded()), name
         synth = [i for i in ids if tasks.registry[i].source == "synth"]
-        assert all(i.endswith("-v3") for i in synth), name
+        assert all(i.endswith("-v4") for i in synth), name
     assert len(tasks.suite("all", source="synth")) == 28
-    assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v3",
-                                                          "SAFL/Synth09-T0R0-v3"}
-    with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v3"):
-        assert tasks.spec("SAFL/Synth00-T1R1").id == "SAFL/Synth00-T1R1-v3"
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v3"):
+    assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v4",
+                                                          "SAFL/Synth09-T0R0-v4"}
+    with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v4"):
+        assert tasks.spec("SAFL/Synth00-T1R1").id == "SAFL/Synth00-T1R1-v4"
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
         assert tasks.spec("SAFL/Synth00-Revisit-v0").data_version == "1"  # records resolve
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v3"):
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
         assert tasks.spec("SAFL/Synth00-Revisit-v1").data_version == "2"
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v3"):
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
         assert tasks.spec("SAFL/Synth00-Revisit-v2").data_version == "3"
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
+        assert tasks.spec("SAFL/Synth00-Revisit-v3").data_version == "4"
 
 
 OLD_DATA = (r"^SAFL/Synth00-T1R1-v0 was defined on synthetic data version 1; this safl-bench "
-            r"generates version 4: run SAFL/Synth00-T1R1-v3 ")
+            r"generates version 5: run SAFL/Synth00-T1R1-v4 ")
 V1_DATA = (r"^SAFL/Synth00-T1R1-v1 was defined on synthetic data version 2; this safl-bench "
-           r"generates version 4: run SAFL/Synth00-T1R1-v3 ")
+           r"generates version 5: run SAFL/Synth00-T1R1-v4 ")
 
 
 def test_an_old_synthetic_task_cannot_be_materialised(tmp_path: Path) -> None:
@@ -214,8 +220,8 @@ def test_an_old_synthetic_task_cannot_be_materialised(tmp_path: Path) -> None:
             tasks.make("SAFL/Synth00-T1R1-v1")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # gymnasium's own "out of date" warning
-        for old in ("v0", "v1", "v2"):
-            with pytest.raises(ConfigError, match="run SAFL/Synth09-Revisit-v3"):
+        for old in ("v0", "v1", "v2", "v3"):
+            with pytest.raises(ConfigError, match="run SAFL/Synth09-Revisit-v4"):
                 gymnasium.make(f"SAFL/Synth09-Revisit-{old}").reset(seed=0)
     source = SynthSource(root=tmp_path, label="given", seed=0)
     with pytest.raises(ConfigError, match=OLD_DATA):  # whatever source it is given
@@ -234,17 +240,17 @@ def test_an_old_synthetic_task_cannot_be_run(
                      "--results", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("safl-bench: error: SAFL/Synth00-T1R1-v0 was")
-    assert "run SAFL/Synth00-T1R1-v3" in err[0]
+    assert "run SAFL/Synth00-T1R1-v4" in err[0]
     assert cli_main(["run", "--method", "sad", "--task", "SAFL/Synth00-T1R1-v1",
                      "--results", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("safl-bench: error: SAFL/Synth00-T1R1-v1 was")
-    assert "run SAFL/Synth00-T1R1-v3" in err[0]
+    assert "run SAFL/Synth00-T1R1-v4" in err[0]
     with pytest.raises(ConfigError, match=OLD_DATA):
         runner.resolve_tasks(["SAFL/Synth00-T1R1-v0"])
     with pytest.raises(ConfigError, match=V1_DATA):
         runner.resolve_tasks(["SAFL/Synth00-T1R1-v1"])
-    assert runner.resolve_tasks(["sanity"]) == ["SAFL/Synth00-T0R0-v3", "SAFL/Synth09-T0R0-v3"]
+    assert runner.resolve_tasks(["sanity"]) == ["SAFL/Synth00-T0R0-v4", "SAFL/Synth09-T0R0-v4"]
     options = runner.RunOptions(results_dir=tmp_path, progress=False)
     with pytest.raises(ConfigError, match=OLD_DATA):
         runner.run_cell(make_method("sad"), "SAFL/Synth00-T1R1-v0", options, log=print)
@@ -255,7 +261,7 @@ def test_an_old_synthetic_task_cannot_be_run(
                                    options, log=lambda _msg: None)
     assert len(outcomes) == 2
     for outcome in outcomes:
-        assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v3" in outcome.message
+        assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v4" in outcome.message
     assert not any(tmp_path.iterdir())  # nothing made, nothing written
 
 
@@ -294,7 +300,7 @@ def test_list_tasks_cli_shows_paper_and_revisit_tasks(capsys: pytest.CaptureFixt
             line = next(x for x in out.splitlines()
                         if x.startswith(f"SAFL/{seq}-{c.name}-v{version} "))
             assert line.split()[1:4] == ["paper", seq[-2:], c.name] and line.endswith(source)
-    assert "SAFL/KITTI08-Revisit-v0" in out and "SAFL/Synth00-Revisit-v3" in out
+    assert "SAFL/KITTI08-Revisit-v0" in out and "SAFL/Synth00-Revisit-v4" in out
     assert (
         cli_main(["list", "tasks", "--suite", "paper", "--source", "kitti", "--fingerprints"]) == 0
     )

@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
     parser.add_argument("what", choices=("methods", "matcher", "parallel", "images"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
-    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v3)")
+    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v4)")
     parser.add_argument("--frames", type=int, default=50, help="frames per timed batch-1 run (default 50)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
     parser.add_argument("--n", type=int, default=4541, help="frames of the difference matrix (default 4541, KITTI 00); 0 skips it")

@@ -15,9 +15,9 @@ from safl_bench.errors import ConfigError
 
 #: Bumped whenever the generator's output changes for the same seed and config. Version "1" was
 #: the data of the synthetic tasks' task version v0 (e.g. SAFL/Synth00-T1R1-v0), version "2" that
-#: of v1, version "3" that of v2; version "4" is that of v3. A bump needs new synthetic task
-#: versions in `safl_bench.tasks.builtin`.
-GENERATOR_VERSION = "4"
+#: of v1, version "3" that of v2, version "4" that of v3; version "5" is that of v4. A bump needs
+#: new synthetic task versions in `safl_bench.tasks.builtin`.
+GENERATOR_VERSION = "5"
 
 DEFAULT_SEED = 0
 #: Test sequences: 00 in the role of KITTI 00 (revisits driving the same way), 09 in that of

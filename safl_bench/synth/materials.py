@@ -25,6 +25,7 @@ WALL = 13
 HEDGE = 14
 SIGN = 15
 TALL_GRASS = 16
+GLASS = 17  # a car's windows, with its seats behind them
 
 FACADES = (FACADE_A, FACADE_B, FACADE_C)
 
@@ -47,6 +48,7 @@ _TABLE = {
     HEDGE: (0.28, 0.08, 0.45),
     SIGN: (0.92, 0.05, 0.0),
     TALL_GRASS: (0.26, 0.09, 0.6),
+    GLASS: (0.22, 0.10, 0.5),
 }
 
 N_MATERIALS = max(_TABLE) + 1

@@ -2,7 +2,7 @@
 streaming environment (`gymnasium.make(task_id)` after `import safl_bench`).
 
     from safl_bench import tasks
-    task = tasks.make("SAFL/Synth00-T5R1.5-v3")
+    task = tasks.make("SAFL/Synth00-T5R1.5-v4")
     db, q = task.database("topview"), task.queries("topview")
     labels = task.truth.labels(matches)          # TP 1 / FP -1 / excluded 0
 """

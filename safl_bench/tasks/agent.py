@@ -4,7 +4,7 @@ It is the batch evaluation run online: at step T it has seen queries 0..T only, 
 matcher's trajectory for query T looks back over queries T-ds..T (causal), so the answers equal
 the batch matcher's `index` on the whole difference matrix with the same `db_limit`:
 
-    env = gymnasium.make("SAFL/Synth00-T1R1-v3")
+    env = gymnasium.make("SAFL/Synth00-T1R1-v4")
     agent = MatcherAgent(method)              # anything with describe() and distance()
     obs, info = env.reset(); agent.reset(info)
     while True:

@@ -1,7 +1,7 @@
 """The built-in tasks and the named suites.
 
 Paper protocol (Table II): the twelve conditions T{1,5,10,20}R{1,1.5,2} on the test sequences 00
-and 09, for the embedded synthetic default (`SAFL/Synth00-T1R1-v3`) and for KITTI
+and 09, for the embedded synthetic default (`SAFL/Synth00-T1R1-v4`) and for KITTI
 (`SAFL/KITTI00-T1R1-v0`); every 4th frame, as the authors' public code did (the paper is silent),
 true positive within 10 m, noise seed 0. A clean T0R0 sanity task per sequence checks that a
 method finds the route without noise.
@@ -20,10 +20,10 @@ are the images resampled to the moved viewpoint (there are no points to re-rende
 neighbour, what comes from outside the image is empty; at T20 up to a third of a 60.4 m wide
 view along the shift, see `safl_bench.resample`).
 
-Synthetic tasks are at task version v3, on synthetic data version "4" (`SYNTH_DATA_VERSIONS`);
-their v0, v1 and v2, on data versions "1", "2" and "3", stay registered so that their records
-resolve, but in no suite, and they cannot be run (this safl-bench generates version "4" only).
-KITTI and top-view image tasks are at v0.
+Synthetic tasks are at task version v4, on synthetic data version "5" (`SYNTH_DATA_VERSIONS`);
+their v0, v1, v2 and v3, on data versions "1", "2", "3" and "4", stay registered so that their
+records resolve, but in no suite, and they cannot be run (this safl-bench generates version "5"
+only). KITTI and top-view image tasks are at v0.
 
 Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
 """
@@ -77,10 +77,10 @@ _BUILTIN: dict[str, list[str]] = {name: [] for name in SUITES}
 _SUPERSEDED: list[str] = []
 
 #: The current version of the built-in tasks per source: the one the suites hold.
-TASK_VERSION = {"synth": 3, "kitti": 0, "bev": 0}
+TASK_VERSION = {"synth": 4, "kitti": 0, "bev": 0}
 #: Task version of the synthetic tasks -> the synthetic data version it is defined on
 #: (`synth.GENERATOR_VERSION`); the versions before `TASK_VERSION["synth"]` are superseded.
-SYNTH_DATA_VERSIONS = {0: "1", 1: "2", 2: "3", 3: "4"}
+SYNTH_DATA_VERSIONS = {0: "1", 1: "2", 2: "3", 3: "4", 4: "5"}
 
 
 def _version(source: str, version: int | None) -> int:
@@ -204,8 +204,8 @@ def register_builtin() -> None:
 
 
 def superseded() -> list[str]:
-    """Ids of the built-in tasks of older versions (the synthetic tasks' v0, v1 and v2): registered,
-    so that their records resolve, but in no suite; a synthetic one cannot be run
+    """Ids of the built-in tasks of older versions (the synthetic tasks' v0, v1, v2 and v3):
+    registered, so that their records resolve, but in no suite; a synthetic one cannot be run
     (`registry.check_data_version`)."""
     return list(_SUPERSEDED)
 

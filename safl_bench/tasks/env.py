@@ -1,6 +1,6 @@
 """The streaming environment: one query top-view map per step, answered with a database index.
 
-After `import safl_bench`, `gymnasium.make("SAFL/Synth00-T5R1.5-v3")` returns it (KITTI tasks
+After `import safl_bench`, `gymnasium.make("SAFL/Synth00-T5R1.5-v4")` returns it (KITTI tasks
 take `kitti_root=...` as a make keyword, or $SAFL_KITTI_ROOT, and top-view image tasks `bev_root=...`
 or $SAFL_BEV_ROOT; `progress=False` silences the
 progress bars of a first run, which generates the synthetic data and renders the maps).

@@ -1,6 +1,6 @@
 """The task registry, modelled on Gymnasium's: `register`, `spec`, `make`, `registry`.
 
-Ids are versioned (`SAFL/Synth00-T1R1-v3`). An id without its version resolves to the latest
+Ids are versioned (`SAFL/Synth00-T1R1-v4`). An id without its version resolves to the latest
 registered version, with a warning naming it; an old version still resolves (old records stay
 readable) with a warning naming the newer one. A synthetic task defined on other synthetic data
 than this safl-bench generates resolves too, but `make` (and a run) refuses it in one line

@@ -1,6 +1,6 @@
 """`TaskSpec`: the frozen definition of one benchmark task (what makes two runs comparable).
 
-A task id follows Gymnasium's `[namespace/]name-v{version}` form, e.g. `SAFL/Synth00-T5R1.5-v3`.
+A task id follows Gymnasium's `[namespace/]name-v{version}` form, e.g. `SAFL/Synth00-T5R1.5-v4`.
 Everything that changes a task's data or its ground truth is a field of the spec and enters its
 `fingerprint`, which result records store: a record made under a different definition of the
 same id can then be detected. A changed definition gets a new version; old versions stay
@@ -43,7 +43,7 @@ def parse_id(task_id: str) -> tuple[str | None, str, int | None]:
     """Split a task id into (namespace, name, version); version None when the id has none."""
     match = ID_RE.fullmatch(task_id)
     if not match:
-        raise ConfigError(f"malformed task id {task_id!r} (expected e.g. 'SAFL/Synth00-T1R1-v3')")
+        raise ConfigError(f"malformed task id {task_id!r} (expected e.g. 'SAFL/Synth00-T1R1-v4')")
     version = match.group("version")
     return match.group("namespace"), match.group("name"), None if version is None else int(version)
 

@@ -4,7 +4,7 @@ Views are what methods read, by kind: "topview" (F, H, W) float32 maps in [0, 1]
 (a list of (M_i, 3) float32 local-map points in the viewpoint frame). They come from the map
 cache on first access, so making a task is cheap until a view is asked for:
 
-    task = safl_bench.tasks.make("SAFL/Synth00-T5R1.5-v3")
+    task = safl_bench.tasks.make("SAFL/Synth00-T5R1.5-v4")
     db = task.database("topview")      # clean maps of every `step`-th frame
     q = task.queries("topview")        # the same frames re-rendered with viewpoint noise
     labels = task.truth.labels(match)  # per query: TP 1, FP -1, excluded 0
