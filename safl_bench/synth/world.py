@@ -107,8 +107,8 @@ CAR_PROFILE = ((-1.0, 0.0), (-0.75, 1.0), (0.45, 1.0), (1.0, 0.0))
 
 
 def _car_height(t: float, cabin: float, body: float, roof: float) -> float:
-    """Height of a car's top at `t` (share of its length from the cabin's centre, + towards the front)
-    for a cabin taking `cabin` of the length, a body `body` high and a roof `roof` high."""
+    """Height of a car's top at `t` (share of its length from the cabin's centre, + towards the
+    front) for a cabin taking `cabin` of the length, a body `body` high and a roof `roof` high."""
     half = cabin / 2
     if abs(t) <= half:
         x = t / half
@@ -304,9 +304,10 @@ class _Town:
         """A parked car centred at (along a, across c), oriented along the street, either end
         first. Its cabin is porous glass (`materials.GLASS`): the beams pass the windows and
         return from inside and from the far side, so the car fills its footprint in the
-        BEV-density images as parked cars do in BEVPlace's images of KITTI (a solid box returned
-        from its outside only: about half of its footprint's pixels 6-10 m away, two thirds now). Its top is drawn in 0.2 m slices along its length (`CAR_PROFILE`:
-        bonnet and boot below the roof), 0.15 m in from the shoulders, which lie lower."""
+        BEV-density images as parked cars do in BEVPlace's images of KITTI (a solid box
+        returned from its outside only: about half of its footprint's pixels 6-10 m away, two
+        thirds now). Its top is drawn in 0.2 m slices along its length (`CAR_PROFILE`: bonnet
+        and boot below the roof), 0.15 m in from the shoulders, which lie lower."""
         rng = self.rng
         length = rng.uniform(3.8, 4.9)
         width = rng.uniform(1.7, 1.9)
