@@ -104,6 +104,7 @@ def _span(ab: tuple[float, float]) -> tuple[float, float]:
 #: to the roof's) at the knots, positions as shares of the cabin's half length from its centre
 #: (+ towards the front); the hood and boot lie beyond the cabin and drop towards the bumpers.
 CAR_PROFILE = ((-1.0, 0.0), (-0.75, 1.0), (0.45, 1.0), (1.0, 0.0))
+_CAR_KNOTS, _CAR_SHARES = (list(v) for v in zip(*CAR_PROFILE, strict=True))
 
 
 def _car_height(t: float, cabin: float, body: float, roof: float) -> float:
@@ -112,7 +113,7 @@ def _car_height(t: float, cabin: float, body: float, roof: float) -> float:
     half = cabin / 2
     if abs(t) <= half:
         x = t / half
-        share = float(np.interp(x, [k for k, _ in CAR_PROFILE], [v for _, v in CAR_PROFILE]))
+        share = float(np.interp(x, _CAR_KNOTS, _CAR_SHARES))
         return body + share * (roof - body)
     beyond = min((abs(t) - half) / max(0.5 - half, 1e-6), 1.0)  # 0 at the cabin, 1 at the bumper
     drop = 0.25 if t > 0 else 0.15  # the hood slopes more than the boot
@@ -212,13 +213,17 @@ class _Town:
         self.yard_rng = rng.spawn(1)[0]
 
     # --- helpers over an axis: `along` runs parallel to a street, `across` perpendicular ---
+    @staticmethod
+    def rect(vertical: bool, a0: float, a1: float, c0: float, c1: float
+             ) -> tuple[float, float, float, float]:
+        """(u0, u1, v0, v1) of the rectangle [a0, a1] along and [c0, c1] across a street;
+        vertical=True means the street runs along v (a u-line street)."""
+        return (c0, c1, a0, a1) if vertical else (a0, a1, c0, c1)
+
     def box(self, vertical: bool, a0: float, a1: float, c0: float, c1: float, height: float,
             mat: int) -> None:
-        """A solid box; vertical=True means the street runs along v (a u-line street)."""
-        if vertical:
-            self.p.solid(c0, c1, a0, a1, height, mat)
-        else:
-            self.p.solid(a0, a1, c0, c1, height, mat)
+        """A solid box over `rect(vertical, a0, a1, c0, c1)`."""
+        self.p.solid(*self.rect(vertical, a0, a1, c0, c1), height, mat)
 
     def point(self, vertical: bool, a: float, c: float) -> tuple[float, float]:
         return (c, a) if vertical else (a, c)
@@ -270,10 +275,7 @@ class _Town:
         bushes, now and then a small tree, and half the time a low boundary at the sidewalk."""
         rng = self.yard_rng
         y0, y1 = _span((edge + inward * 0.5, edge + inward * (depth - 0.5)))
-        if vertical:
-            self.meadow(y0, y1, a0, a1, rng.uniform(0.2, 0.6), rng)
-        else:
-            self.meadow(a0, a1, y0, y1, rng.uniform(0.2, 0.6), rng)
+        self.meadow(*self.rect(vertical, a0, a1, y0, y1), rng.uniform(0.2, 0.6), rng)
         a = a0 + rng.uniform(0.5, 3.0)
         while a < a1 - 0.5:
             u, v = self.point(vertical, a, edge + inward * rng.uniform(0.8, max(depth - 0.8, 0.9)))
@@ -339,12 +341,10 @@ class _Town:
             length = g.size_v if vertical else g.size_u
             for side in (-1, 1):
                 c0, c1 = sorted((x + side * half, x + side * (half + walk)))
-                u0, u1, v0, v1 = (c0, c1, 0, length) if vertical else (0, length, c0, c1)
-                self.p.ground(u0, u1, v0, v1, SIDEWALK_Z, M.SIDEWALK)
+                self.p.ground(*self.rect(vertical, 0, length, c0, c1), SIDEWALK_Z, M.SIDEWALK)
         for vertical, x, half, _ in lines:
             length = g.size_v if vertical else g.size_u
-            u0, u1, v0, v1 = (x - half, x + half, 0, length) if vertical else (0, length, x - half, x + half)
-            self.p.ground(u0, u1, v0, v1, 0.0, M.ASPHALT)
+            self.p.ground(*self.rect(vertical, 0, length, x - half, x + half), 0.0, M.ASPHALT)
         for vertical, x, half, walk in lines:
             self.furnish_street(vertical, x, half, walk)
 
@@ -355,11 +355,7 @@ class _Town:
             centres, halves, walks, length = g.v_lines, g.v_half_width, g.v_sidewalk, g.size_v
         else:
             centres, halves, walks, length = g.u_lines, g.u_half_width, g.u_sidewalk, g.size_u
-        edges = [0.0]
-        for c, h, w in zip(centres, halves, walks, strict=True):
-            edges += [float(c - h - w), float(c + h + w)]
-        edges.append(float(length))
-        return [(edges[k], edges[k + 1]) for k in range(0, len(edges), 2)]
+        return self._block_edges(centres, halves, walks, float(length))
 
     def furnish_street(self, vertical: bool, x: float, half: float, walk: float) -> None:
         rng = self.rng
@@ -367,8 +363,7 @@ class _Town:
         for a0, a1 in self.crossings(vertical):
             if centre_line:  # dashed centre marking
                 for a in np.arange(a0 + 1.0, a1 - 3.0, 9.0):
-                    u0, u1, v0, v1 = (x - 0.08, x + 0.08, a, a + 3.0) if vertical else (a, a + 3.0, x - 0.08, x + 0.08)
-                    self.p.ground(u0, u1, v0, v1, 0.0, M.MARKING)
+                    self.p.ground(*self.rect(vertical, a, a + 3.0, x - 0.08, x + 0.08), 0.0, M.MARKING)
             for side in (-1, 1):
                 kerb = x + side * half
                 walk_mid = x + side * (half + walk / 2)
@@ -379,10 +374,8 @@ class _Town:
                     u, v = self.point(vertical, float(a), pole_c)
                     self.p.disc_solid(u, v, 0.1, height, M.POLE)
                     arm0, arm1 = sorted((pole_c, pole_c - side * 1.6))
-                    if vertical:
-                        self.p.floating(arm0, arm1, a - 0.15, a + 0.15, height - 0.35, height, M.POLE)
-                    else:
-                        self.p.floating(a - 0.15, a + 0.15, arm0, arm1, height - 0.35, height, M.POLE)
+                    self.p.floating(*self.rect(vertical, a - 0.15, a + 0.15, arm0, arm1),
+                                    height - 0.35, height, M.POLE)
                 if a1 - a0 > 20 and rng.random() < 0.35:  # traffic sign near the crossing
                     a = a1 - 3.0 if side > 0 else a0 + 3.0
                     u, v = self.point(vertical, a, x + side * (half + 0.4))
@@ -483,10 +476,7 @@ class _Town:
                     self.box(vertical, a - 1.0, a + lot - 4.0, *_span((b, b + inward * thick)), height, mat)
                 if rng.random() < 0.5:  # an unkempt front garden
                     g0, g1 = _span((edge + inward * 0.8, edge + inward * max(setback - 0.5, 1.0)))
-                    if vertical:
-                        self.meadow(g0, g1, a, a + house_w, rng.uniform(0.3, 0.8))
-                    else:
-                        self.meadow(a, a + house_w, g0, g1, rng.uniform(0.3, 0.8))
+                    self.meadow(*self.rect(vertical, a, a + house_w, g0, g1), rng.uniform(0.3, 0.8))
                 for _ in range(int(rng.integers(1, 5))):  # bushes in the front garden
                     u, v = self.point(vertical, a + rng.uniform(0, house_w), edge + inward * rng.uniform(1.2, max(setback - 1.0, 1.3)))
                     self.shrub(u, v)
