@@ -9,11 +9,27 @@ standard deviation instead (OpenSeqSLAM's other mode). The descriptor is the fla
 `size*size` float32 values.
 
 distance: the sum of absolute differences divided by the number of pixels (SeqSLAM's
-difference matrix), computed with torch.cdist(p=1) in query chunks: no Python loop over pairs.
+difference matrix). `sad_matrix` computes the sums in a numba kernel (parallel over tiles of 32
+queries x 128 database descriptors, vectorised across the 128 database descriptors of a tile)
+and divides by the number of pixels in float32 afterwards.
+
+Why it is exact: the records were computed with torch.cdist(p=1), whose CPU kernel sums
+|q_x - d_x| for one pair in float32, one term after the other, x = 0, 1, ..., D - 1 (checked:
+bitwise equal to that sequential sum, unequal to any 4- to 32-lane or pairwise reordering). The
+kernel keeps that order for every pair: the SIMD lanes hold different pairs, never different
+terms of one sum, and it is compiled without fastmath, so no sum is reassociated. It is
+therefore bitwise equal to torch.cdist(p=1) (tested against a plain numpy loop and against
+cdist, odd sizes included; checked on the 4541 x 4541 matrix of KITTI 00's real top views).
+Why it is faster: cdist's kernel runs one pair at a time, a scalar loop; the tile (a 16 KB
+accumulator, 128 database columns of the transposed database read row by row) stays in L1/L2
+and each database row is reused by 32 queries. `safl-bench bench methods --method sad` times
+it against cdist in the same run (4541 x 4541 x 1024, about 21 G absolute differences; 2-core
+AMD EPYC: 9-11 s with cdist, about 1.3-1.7 s with the kernel).
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import torch
 
@@ -22,6 +38,62 @@ from safl_bench.method import Method, Views, as_topview
 from safl_bench.method_registry import register_method
 
 NORMALISATIONS = ("range", "zscore")
+#: Tile of the difference-matrix kernel: queries x database descriptors (accumulator 16 KB).
+TILE_QUERIES = 32
+TILE_DATABASE = 128
+
+
+@numba.njit(cache=True, inline="always")
+def _accumulate_row(acc: np.ndarray, row: np.ndarray, value: np.float32, width: int) -> None:
+    for j in range(width):  # independent lanes: vectorised without reordering any sum
+        acc[j] += abs(value - row[j])
+
+
+@numba.njit(cache=True, parallel=True)
+def _sad_sums(queries: np.ndarray, database_t: np.ndarray, out: np.ndarray) -> None:
+    """out[i, j] = sum_x |queries[i, x] - database_t[x, j]| in float32, x in order."""
+    nq, dim = queries.shape
+    ndb = database_t.shape[1]
+    n_jt = (ndb + TILE_DATABASE - 1) // TILE_DATABASE
+    n_it = (nq + TILE_QUERIES - 1) // TILE_QUERIES
+    for tile in numba.prange(n_it * n_jt):
+        it = tile // n_jt
+        i0 = it * TILE_QUERIES
+        i1 = min(i0 + TILE_QUERIES, nq)
+        j0 = (tile - it * n_jt) * TILE_DATABASE
+        j1 = min(j0 + TILE_DATABASE, ndb)
+        width = j1 - j0
+        acc = np.zeros((TILE_QUERIES, TILE_DATABASE), np.float32)
+        for x in range(dim):
+            row = database_t[x, j0:j1]
+            for i in range(i1 - i0):
+                _accumulate_row(acc[i], row, queries[i0 + i, x], width)
+        out[i0:i1, j0:j1] = acc[:i1 - i0, :width]
+
+
+def sad_matrix(queries: np.ndarray, database: np.ndarray, chunk_rows: int = 1024) -> np.ndarray:
+    """(Nq, D), (Ndb, D) float32 -> (Nq, Ndb) float32 mean absolute differences, bitwise equal
+    to torch.cdist(q, d, p=1) / D (see the module docstring)."""
+    q = np.ascontiguousarray(queries, dtype=np.float32)
+    database_t = np.ascontiguousarray(np.asarray(database, dtype=np.float32).T)
+    out = np.empty((q.shape[0], database_t.shape[1]), np.float32)
+    for lo in range(0, q.shape[0], chunk_rows):
+        _sad_sums(q[lo:lo + chunk_rows], database_t, out[lo:lo + chunk_rows])
+    out /= np.float32(max(q.shape[1], 1))
+    return out
+
+
+def sad_matrix_cdist(queries: np.ndarray, database: np.ndarray, chunk_rows: int = 1024) -> np.ndarray:
+    """The former implementation (torch.cdist(p=1) in query chunks), kept as the reference the
+    kernel is tested and benchmarked against."""
+    q = torch.from_numpy(np.ascontiguousarray(queries, dtype=np.float32))
+    d = torch.from_numpy(np.ascontiguousarray(database, dtype=np.float32))
+    out = np.empty((q.shape[0], d.shape[0]), np.float32)
+    for lo in range(0, q.shape[0], chunk_rows):
+        hi = min(lo + chunk_rows, q.shape[0])
+        out[lo:hi] = torch.cdist(q[lo:hi], d, p=1).numpy()
+    out /= np.float32(max(q.shape[1], 1))
+    return out
 
 
 def block_mean(maps: np.ndarray, size: int) -> np.ndarray:
@@ -85,13 +157,7 @@ class SAD(Method):
     def distance(self, queries: np.ndarray, database: np.ndarray) -> np.ndarray:
         """Mean absolute difference per pixel, (Nq, Ndb) float32."""
         self._validate()
-        q = torch.from_numpy(np.ascontiguousarray(queries, dtype=np.float32))
-        d = torch.from_numpy(np.ascontiguousarray(database, dtype=np.float32))
+        q, d = np.asarray(queries), np.asarray(database)
         if q.ndim != 2 or d.ndim != 2 or q.shape[1] != d.shape[1]:
             raise DataError(f"sad: descriptor shapes do not match: {tuple(q.shape)} vs {tuple(d.shape)}")
-        out = np.empty((q.shape[0], d.shape[0]), np.float32)
-        for lo in range(0, q.shape[0], self.chunk_rows):
-            hi = min(lo + self.chunk_rows, q.shape[0])
-            out[lo:hi] = torch.cdist(q[lo:hi], d, p=1).numpy()
-        out /= np.float32(max(q.shape[1], 1))
-        return out
+        return sad_matrix(q, d, self.chunk_rows)

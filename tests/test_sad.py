@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.sad import SAD, patch_normalise
+import torch
+
+from baselines.sad import SAD, patch_normalise, sad_matrix, sad_matrix_cdist
 from safl_bench.check import check_method, sample_views
 from safl_bench.errors import ConfigError, DataError
 
@@ -41,6 +43,39 @@ def test_distance_is_mean_absolute_difference():
     expected = np.abs(q[:, None, :] - db[None]).mean(axis=2)
     np.testing.assert_allclose(SAD().distance(q, db), expected, rtol=1e-5)
     np.testing.assert_allclose(SAD(chunk_rows=3).distance(q, db), expected, rtol=1e-5)
+
+
+def _plain_sad(q: np.ndarray, db: np.ndarray) -> np.ndarray:
+    """The plain reference: float32 sums, one term after another, then / D."""
+    acc = np.zeros((len(q), len(db)), np.float32)
+    for x in range(q.shape[1]):
+        acc += np.abs(q[:, x, None] - db[None, :, x])
+    return acc / np.float32(max(q.shape[1], 1))
+
+
+@pytest.mark.parametrize(("nq", "ndb", "dim"), [(1, 1, 1), (7, 11, 64), (33, 129, 37), (65, 300, 1024),
+                                                 (3, 257, 5), (0, 4, 8), (4, 0, 8)])
+def test_fast_distance_is_bitwise_the_plain_sum_and_cdist(nq, ndb, dim):
+    """The kernel (tiles of 32 x 128, odd sizes and partial tiles included) gives exactly the
+    plain sequential float32 sum and exactly torch.cdist(p=1), the former implementation."""
+    rng = np.random.default_rng(nq * 1000 + ndb + dim)
+    q = rng.random((nq, dim), dtype=np.float32) - 0.5
+    db = rng.random((ndb, dim), dtype=np.float32) - 0.5
+    fast = sad_matrix(q, db)
+    assert fast.dtype == np.float32 and fast.shape == (nq, ndb)
+    assert np.array_equal(fast, _plain_sad(q, db))
+    assert np.array_equal(fast, sad_matrix_cdist(q, db))
+    assert np.array_equal(SAD(chunk_rows=5).distance(q, db), fast)
+    if nq and ndb:
+        cdist = torch.cdist(torch.from_numpy(q), torch.from_numpy(db), p=1).numpy() / np.float32(dim)
+        assert np.array_equal(fast, cdist)
+
+
+def test_fast_distance_on_descriptors_matches_the_plain_sum():
+    maps = np.random.default_rng(3).random((9, 64, 64)).astype(np.float32)
+    d = SAD().describe(maps)
+    assert np.array_equal(SAD().distance(d[:4], d), _plain_sad(d[:4], d))
+    assert np.array_equal(SAD().distance(d[::2], d[::-1]), _plain_sad(d[::2], d[::-1]))  # strided views
 
 
 def test_non_multiple_sizes_use_area_resizing():
