@@ -96,10 +96,13 @@ other): one thread is the robust choice there.
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numba
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -441,12 +444,60 @@ def _fused_embedder(emb: Any) -> dict[str, tuple[torch.Tensor, torch.Tensor]]:
     }
 
 
-def _instance_norm(x: torch.Tensor, relu: bool = True) -> torch.Tensor:
-    """Instance normalisation (biased variance, eps 1e-5), then ReLU, in place where possible
-    (faster than F.instance_norm on channels-last maps)."""
+def _instance_norm_torch(x: torch.Tensor, relu: bool = True) -> torch.Tensor:
+    """Instance normalisation (biased variance, eps 1e-5), then ReLU, in torch ops (the former
+    fast path's; kept as the reference of `_instance_norm`)."""
     x = x - x.mean(dim=(2, 3), keepdim=True)
     x = x.mul_(torch.rsqrt((x * x).mean(dim=(2, 3), keepdim=True).add_(1e-5)))
     return x.relu_() if relu else x
+
+
+@numba.njit(cache=True, parallel=True)
+def _instance_norm_kernel(x: np.ndarray, relu: bool, unit: bool) -> None:
+    """In place on (N, H*W, C) (a channels-last map): per instance and channel, the mean, then
+    the biased variance of the deviations (two passes, sums in float64), then
+    (x - mean) / sqrt(var + 1e-5) and ReLU (`relu`) or, with `unit`, each pixel's C values
+    divided by max(their L2 norm, 1e-6) (the extractor's last step)."""
+    n, pixels, c = x.shape
+    for i in numba.prange(n):
+        total = np.zeros(c, np.float64)
+        for k in range(pixels):
+            for j in range(c):
+                total[j] += x[i, k, j]
+        mean = np.empty(c, np.float32)
+        for j in range(c):
+            mean[j] = np.float32(total[j] / pixels)
+        squares = np.zeros(c, np.float64)
+        for k in range(pixels):
+            for j in range(c):
+                d = np.float64(x[i, k, j] - mean[j])
+                squares[j] += d * d
+        rstd = np.empty(c, np.float32)
+        for j in range(c):
+            rstd[j] = np.float32(1.0 / np.sqrt(squares[j] / pixels + 1e-5))
+        zero = np.float32(0.0)
+        for k in range(pixels):
+            norm = zero
+            for j in range(c):
+                v = (x[i, k, j] - mean[j]) * rstd[j]
+                if relu:
+                    v = max(v, zero)
+                x[i, k, j] = v
+                norm += v * v
+            if unit:
+                scale = np.float32(1.0) / max(np.sqrt(norm), np.float32(1e-6))
+                for j in range(c):
+                    x[i, k, j] *= scale
+
+
+def _instance_norm(x: torch.Tensor, relu: bool = True, unit: bool = False) -> torch.Tensor:
+    """Instance normalisation of a (N, C, H, W) map in place (one fused kernel over its
+    channels-last memory: three reads and one write instead of the eight passes the torch ops
+    make), then ReLU, or (`unit`) the per-pixel L2 normalisation."""
+    x = x.contiguous(memory_format=torch.channels_last)
+    n, c, h, w = x.shape
+    _instance_norm_kernel(x.permute(0, 2, 3, 1).numpy().reshape(n, h * w, c), relu, unit)
+    return x
 
 
 def _embed_fast(geometry: _FastGeometry, x: torch.Tensor) -> torch.Tensor:
@@ -488,8 +539,7 @@ def _copy_features(geometry: _FastGeometry, g: dict[str, Any], flat: torch.Tenso
     x = _instance_norm(F.conv2d(x, w_conv0b, padding=2))
     x = F.avg_pool2d(x, 2)
     x = _instance_norm(F.conv2d(x, w_conv1a, padding=2))
-    x = _instance_norm(F.conv2d(x, w_conv1b, padding=2), relu=False)
-    x = channel_l2_normalize(x, dim=1)
+    x = _instance_norm(F.conv2d(x, w_conv1b, padding=2), relu=False, unit=True)
     rows = x.permute(0, 2, 3, 1).reshape(-1, 32)  # (B*M*h*w, 32)
     offsets = torch.arange(b).view(b, 1, 1, 1) * g["map_pixels"]
     index = g["tap_index"][None] + offsets  # (B, 4, M, P)
@@ -588,6 +638,22 @@ def _is_safetensors(path: Path) -> bool:
     return len(head) == 9 and head[8:9] == b"{"
 
 
+@contextmanager
+def _numba_threads_as_torch() -> Iterator[None]:
+    """numba's kernels (instance norm) on as many threads as torch's convolutions. Both counts
+    are restored after (numba's OpenMP layer sets the OpenMP count that torch reads too)."""
+    torch_before = torch.get_num_threads()  # first: starting numba's layer resets OpenMP's count
+    before = numba.get_num_threads()
+    most = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    numba.set_num_threads(max(1, min(torch_before, most)))
+    torch.set_num_threads(torch_before)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+        torch.set_num_threads(torch_before)
+
+
 # -- the method -------------------------------------------------------------------------------------
 @register_method
 class BevPlace(Method):
@@ -656,7 +722,7 @@ class BevPlace(Method):
             raise DataError(f"bevplace: top views of {h}x{w} are too small: the 1/16-scale copies "
                             f"need at least {minimum_size()}x{minimum_size()}")
         out = np.empty((n, DESCRIPTOR_DIM), np.float32)
-        with torch.inference_mode():
+        with torch.inference_mode(), _numba_threads_as_torch():
             for lo in range(0, n, self.batch_size):
                 chunk = torch.from_numpy(np.ascontiguousarray(arr[lo:lo + self.batch_size]))
                 if self.fast:

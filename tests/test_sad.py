@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import torch
 
 from baselines.sad import SAD, patch_normalise, sad_matrix, sad_matrix_cdist

@@ -8,6 +8,8 @@
                                                  cell serially, on local workers and on Ray
   safl-bench bench images --bev-root DIR         reading a top-view image sequence, cold and
                                                  cached
+  safl-bench bench bevplace [--reference DIR]    BEVPlace against its authors' code (run side by
+                                                 side) and against the compute bound, both ratios
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -24,10 +26,11 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
     parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v4)")
-    parser.add_argument("--frames", type=int, default=50, help="frames per timed batch-1 run (default 50)")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="frames per timed batch-1 run (default 50; bevplace: 8)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
     parser.add_argument("--n", type=int, default=4541, help="frames of the difference matrix (default 4541, KITTI 00); 0 skips it")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
@@ -41,6 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="parallel: KITTI odometry root (default: the synthetic default)")
     parser.add_argument("--bev-root", metavar="DIR", default=None,
                         help="images: the top-view image folders (BEVPlace's layout); --sequence picks one")
+    parser.add_argument("--reference", metavar="DIR", default=None,
+                        help="bevplace: the authors' code (the folder holding network/, e.g. "
+                             "../shared/bevplace/reference-52f31362), timed side by side")
+    parser.add_argument("--checkpoint", metavar="FILE", default=None,
+                        help="bevplace: the authors' checkpoint for their code (default: the shipped weights, the same tensors)")
+    parser.add_argument("--batch-size", type=int, default=4, help="bevplace: frames per batch when batched (default 4)")
+    parser.add_argument("--plain", action="store_true", help="bevplace: also time the plain port at batch 1")
     parser.add_argument("--json", help="also write every figure, with the environment, to this JSON file")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -49,6 +59,8 @@ def main(args: argparse.Namespace) -> int:
     """Run the chosen benchmark and print its table."""
     from safl_bench.atomic import atomic_write_json
 
+    if args.frames is None:
+        args.frames = 8 if args.what == "bevplace" else 50
     if args.repeats < 1 or args.frames < 1 or args.n < 0:
         raise ConfigError("--repeats and --frames must be >= 1 and --n >= 0")
     if args.threads is not None:
@@ -69,6 +81,8 @@ def main(args: argparse.Namespace) -> int:
         if args.json:
             atomic_write_json(args.json, figures)
         return 0
+    if args.what == "bevplace":
+        return _bevplace(args)
     if args.what == "matcher":
         from safl_bench import matching_bench
 
@@ -105,4 +119,20 @@ def _parallel(args: argparse.Namespace) -> int:
     print(parallel_bench.format_results(results))
     if args.json:
         atomic_write_json(args.json, results)
+    return 0
+
+
+def _bevplace(args: argparse.Namespace) -> int:
+    from baselines import bevplace_bench
+    from safl_bench.atomic import atomic_write_json
+
+    if args.batch_size < 1:
+        raise ConfigError(f"--batch-size must be >= 1, got {args.batch_size}")
+    views, note = bevplace_bench.load_views(args.bev_root, args.sequence, args.frames)
+    result = bevplace_bench.run(views, reference=args.reference, checkpoint=args.checkpoint,
+                                batch_size=args.batch_size, rounds=args.repeats, plain=args.plain)
+    result["views"] = note
+    print(bevplace_bench.format_results(result, note))
+    if args.json:
+        atomic_write_json(args.json, result)
     return 0
