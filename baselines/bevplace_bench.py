@@ -32,6 +32,7 @@ differ by about 1e-4).
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import statistics
 import sys
 import time
@@ -125,7 +126,7 @@ class AuthorsCode:
             from safl_bench.errors import DataError
 
             raise DataError(f"{folder}: not BEVPlace's code (expected network/bevplace.py in it)")
-        if importlib.util.find_spec("skimage") is None and "skimage" not in sys.modules:
+        if "skimage" not in sys.modules and importlib.util.find_spec("skimage") is None:
             stub, io = types.ModuleType("skimage"), types.ModuleType("skimage.io")
             io.imread = None  # type: ignore[attr-defined]  # imported by network/utils.py, unused here
             stub.io = io  # type: ignore[attr-defined]

@@ -3,8 +3,10 @@ invariance, input checks and the refusal of unsafe or ill-fitting checkpoints.""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -188,3 +190,116 @@ def test_bench_times_it_at_the_published_size(method: BevPlace) -> None:
     assert result["views"] == "64x64 views resampled to 151x151 for timing"
     assert result["batch1"]["per_item_ms"] > 0 and result["batched"]["n_items"] == 2
     assert "bevplace: 64x64 views resampled to 151x151" in method_bench.format_results([result])
+
+
+@pytest.mark.parametrize(("n", "c", "h", "w"), [(1, 16, 151, 151), (3, 32, 7, 9), (2, 32, 1, 2)])
+def test_fused_instance_norm_equals_the_torch_ops(n: int, c: int, h: int, w: int) -> None:
+    """The numba kernel against the former torch ops (instance norm, ReLU) and, with `unit`,
+    against instance norm followed by the per-pixel L2 normalisation."""
+    from baselines.bevplace_net import channel_l2_normalize
+
+    x = (torch.randn(n, c, h, w, generator=torch.Generator().manual_seed(c + h)) * 3 + 1)
+    x = x.contiguous(memory_format=torch.channels_last)
+    want = bevplace._instance_norm_torch(x.clone())
+    got = bevplace._instance_norm(x.clone())
+    assert got.is_contiguous(memory_format=torch.channels_last)
+    assert float((got - want).abs().max()) < 1e-5
+    unit = bevplace._instance_norm(x.clone(), relu=False, unit=True)
+    want_unit = channel_l2_normalize(bevplace._instance_norm_torch(x.clone(), relu=False), dim=1)
+    assert float((unit - want_unit).abs().max()) < 1e-5
+    # NCHW input is taken too (made channels-last first)
+    assert float((bevplace._instance_norm(x.contiguous()) - want).abs().max()) < 1e-5
+
+
+def test_fast_path_equals_the_plain_port_at_the_published_size(method: BevPlace) -> None:
+    """Three 151 x 151 views (BEVPlace's image size, every canvas of the group), batched 2 + 1
+    (a partial batch): the fast path within float32 round-off of the plain port, and the
+    torch thread count left as it was (numba's threads follow torch's inside)."""
+    views = sample_views("topview", n=3, size=151, seed=11)
+    threads = torch.get_num_threads()
+    fast = BevPlace(batch_size=2).describe(views)
+    assert torch.get_num_threads() == threads
+    plain = BevPlace(fast=False).describe(views)
+    assert float(np.abs(fast - plain).max()) < 1e-5
+    assert np.array_equal(fast, BevPlace(batch_size=3).describe(views))  # batching changes nothing
+
+
+def test_multiply_adds_of_the_bound() -> None:
+    from baselines import bevplace_bench
+
+    macs = bevplace_bench.multiply_adds(151)
+    assert macs["total"] == macs["per_copy_cnn"] + macs["group_cnn"] + macs["netvlad"]
+    assert 13.1e9 < macs["total"] < 13.3e9 and 7.4e9 < macs["group_cnn"] < 7.6e9
+
+
+_FAKE_NETWORK = {
+    "__init__.py": "",
+    "bevplace.py": (
+        "import torch\n"
+        "from network.netvlad import NetVLAD\n"
+        "class BEVPlace(torch.nn.Module):\n"
+        "    def __init__(self):\n"
+        "        super().__init__()\n"
+        "        self.netvlad = NetVLAD().cuda()  # the real code calls .cuda() too\n"
+        "    def forward(self, inputs):\n"
+        "        imgs, pts = inputs\n"
+        "        return torch.nn.functional.normalize(imgs[0].mean(dim=(1, 2, 3))[:, None].expand(-1, 8192), dim=1)\n"),
+    "netvlad.py": (
+        "import torch\n"
+        "class NetVLAD(torch.nn.Module):\n"
+        "    def __init__(self):\n"
+        "        super().__init__()\n"
+        "        self.centroids = torch.nn.Parameter(torch.zeros(64, 128))\n"),
+    "groupnet.py": "group_config = None\n",
+    "utils.py": (
+        "import torch\n"
+        "from skimage.io import imread\n"
+        "class TransformerCV:\n"
+        "    def __init__(self, config):\n"
+        "        pass\n"
+        "    def transform(self, img, pts):\n"
+        "        return {'img': [img] * 25, 'pts': [pts] * 25}\n"
+        "    @staticmethod\n"
+        "    def postprocess_transformed_imgs(results):\n"
+        "        return ([torch.tensor(i).permute(2, 0, 1) for i in results['img']],\n"
+        "                [torch.tensor(p) for p in results['pts']])\n"),
+}
+
+
+@pytest.mark.slow
+def test_bench_bevplace_runs_the_authors_code_side_by_side(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`bench bevplace` imports a `network/` folder at run time (a stand-in with the authors'
+    interface here: .cuda() in its constructor, skimage imported), times both, prints both
+    ratios; the torch thread count is respected."""
+    from baselines import bevplace_bench
+    from safl_bench.cli import main
+
+    folder = tmp_path / "reference-0000000"
+    (folder / "network").mkdir(parents=True)
+    for name, text in _FAKE_NETWORK.items():
+        (folder / "network" / name).write_text(text)
+    fake_state = {"netvlad.centroids": torch.zeros(64, 128)}
+    code = bevplace_bench.AuthorsCode(folder, fake_state)
+    assert code.describe(sample_views("topview", n=2, size=151)).shape == (2, 8192)
+    with pytest.raises(DataError, match="not BEVPlace's code"):
+        bevplace_bench.AuthorsCode(tmp_path, fake_state)
+    views = sample_views("topview", n=2, size=151)
+    monkey_state = bevplace_bench.AuthorsCode.__init__
+
+    def with_fake_state(self: Any, path: Any, state: Any) -> None:
+        monkey_state(self, path, fake_state)
+
+    out = tmp_path / "b.json"
+    try:
+        bevplace_bench.AuthorsCode.__init__ = with_fake_state  # type: ignore[method-assign]
+        result = bevplace_bench.run(views, reference=folder, batch_size=2, rounds=1)
+        assert main(["bench", "bevplace", "--frames", "2", "--repeats", "1", "--batch-size", "2",
+                     "--threads", "1", "--reference", str(folder), "--json", str(out)]) == 0
+    finally:
+        bevplace_bench.AuthorsCode.__init__ = monkey_state  # type: ignore[method-assign]
+    assert set(result["figures"]) == {"ours_batch1", "ours_batched", "authors_batch1", "authors_batched"}
+    assert result["ratios"]["authors_over_ours_batched"] > 0 and result["ratios"]["ours_batched_over_bound"] > 0
+    assert result["checks"]["max_abs_fast_vs_plain"] < 1e-5
+    printed = capsys.readouterr().out
+    assert "ratio authors' code / ours, batched" in printed and "ratio ours batched / compute bound" in printed
+    assert json.loads(out.read_text())["env"]["torch_threads"] == 1
