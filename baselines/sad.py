@@ -29,6 +29,8 @@ AMD EPYC: 9-11 s with cdist, about 1.3-1.7 s with the kernel).
 
 from __future__ import annotations
 
+from typing import Any, ClassVar
+
 import numba
 import numpy as np
 import torch
@@ -134,6 +136,8 @@ class SAD(Method):
         self.chunk_rows = chunk_rows
 
     runtime_params = ("chunk_rows",)
+    #: `safl-bench bench methods` times the former torch.cdist implementation beside the kernel.
+    bench_reference_distance: ClassVar[tuple[str, Any]] = ("torch.cdist(p=1)", sad_matrix_cdist)
 
     def _validate(self) -> None:
         if not isinstance(self.size, int) or self.size < 1:

@@ -86,7 +86,23 @@ def bench_method(
         mat = timing.time_call(lambda: method.distance(big, big), name="difference matrix",
                                repeats=1, warmup=0, n_items=matrix_n)
         out["matrix"] = {"n": matrix_n, "own_distance": _own_distance(method), **mat.to_dict()}
+        reference = getattr(type(method), "bench_reference_distance", None)
+        if reference is not None:
+            out["matrix"]["reference"] = _reference_matrix(method, reference, big, mat.median_s)
     return out
+
+
+def _reference_matrix(method: Method, reference: Any, big: np.ndarray, own_s: float) -> dict[str, Any]:
+    """The method's former (reference) distance on the same matrix, timed in the same run, and
+    how far the method's own result is from it."""
+    name, fn = reference
+    own = np.asarray(method.distance(big, big))
+    ref_timing = timing.time_call(lambda: fn(big, big), name=f"difference matrix ({name})",
+                                  repeats=1, warmup=0, n_items=len(big))
+    ref = np.asarray(fn(big, big))
+    return {"name": name, "median_s": ref_timing.median_s, "speedup": ref_timing.median_s / own_s,
+            "bitwise_equal": bool(np.array_equal(own, ref)),
+            "max_abs_diff": float(np.abs(own.astype(np.float64) - ref).max()) if own.size else 0.0}
 
 
 def run(
@@ -121,6 +137,13 @@ def format_results(results: Sequence[dict[str, Any]]) -> str:
         mat = f"{matrix['median_s']:.2f}" if matrix else "-"
         lines.append(f"{r['method']:14s} {r['input']:8s} {r['batch1']['per_item_ms']:15.2f} "
                      f"{r['batched']['extra']['frames_per_s']:19.0f} {mat:>15s}")
+    for r in results:
+        ref = (r.get("matrix") or {}).get("reference")
+        if ref:
+            lines.append(f"({r['method']}: matrix {r['matrix']['median_s']:.2f} s against {ref['median_s']:.2f} s "
+                         f"with {ref['name']} in the same run, {ref['speedup']:.1f}x; "
+                         + ("bitwise equal" if ref["bitwise_equal"] else f"max abs diff {ref['max_abs_diff']:.1e}")
+                         + ")")
     for r in results:
         if r.get("views"):
             lines.append(f"({r['method']}: {r['views']}; batched: {r['batched']['n_items']} frames)")

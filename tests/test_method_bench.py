@@ -16,6 +16,9 @@ def test_bench_method_reports_batch1_batched_and_matrix() -> None:
     assert result["batch1"]["extra"]["batch_size"] == 1
     assert result["batched"]["n_items"] == 12 and result["batched"]["extra"]["frames_per_s"] > 0
     assert result["matrix"]["n"] == 30 and result["matrix"]["median_s"] >= 0
+    ref = result["matrix"]["reference"]  # SAD's former torch.cdist, timed beside its kernel
+    assert ref["name"] == "torch.cdist(p=1)" and ref["bitwise_equal"] and ref["max_abs_diff"] == 0.0
+    assert "with torch.cdist(p=1) in the same run" in method_bench.format_results([result])
     table = method_bench.format_results([result])
     assert table.splitlines()[1].split()[:2] == ["sad", "topview"]
 
