@@ -76,21 +76,32 @@ Two paths compute the same descriptors:
   affine in the grey image and the border mask, so the first convolution is folded to one
   input channel plus a per-copy constant map; the warp is a gather of precomputed bilinear taps;
   copies of one canvas size run as one batch (copies of different sizes cannot share a padded
-  canvas: instance normalisation would see the padding); channels-last layout; instance norm
-  and point sampling written out for it; the group CNN's two branches fused into wider and
-  grouped convolutions, run on 256 points at a time (cache-sized); NetVLAD by matrix products.
-  Descriptors agree with the plain port to about 1e-7 (tested < 1e-4).
+  canvas: instance normalisation would see the padding); channels-last layout; point sampling
+  written out for it; instance normalisation (+ ReLU, and the extractor's last per-pixel L2
+  normalisation) as one numba kernel over the channels-last map (`_instance_norm`: per instance
+  and channel the mean, then the biased variance of the deviations, two passes with float64
+  sums, then one pass writing (x - mean) / sqrt(var + 1e-5); the same formula as the torch ops,
+  in three reads and one write instead of about eight passes, and no less exact: 5e-7 from a
+  float64 reference where the torch ops are 8e-7); the group CNN's two branches fused into
+  wider and grouped convolutions, run on 256 points at a time (cache-sized); NetVLAD by matrix
+  products. Descriptors agree with the plain port to about 1e-7 (tested < 1e-5), and with the
+  fast path before the fused kernel to 7e-8 (max abs over real KITTI 00 images). Nothing is in
+  lower precision: every convolution and sum is float32 (or float64) as before. numba's kernel
+  runs on torch's thread count (`_numba_threads_as_torch`).
 
-Speed (151 x 151 views, torch 2.13 CPU, 2 threads, the 2-core AMD EPYC development machine,
-median of 15): 78 ms per frame at batch 1, 13.5 frames/s batched (batch_size 4); the plain port
-110-130 ms; one thread: 153 ms (plain 200-275 ms). Work: 26.3 GFLOP (13.2 G multiply-adds)
-per frame, 57 % of it in the group CNN (841 points x 25 cells), the rest in the per-copy CNN
-over 213k canvas pixels; convolutions are 85 % of the time. This CPU runs a 16 -> 32 5 x 5
-channels-last convolution at about 475 GFLOP/s (2048^3 sgemm: 200 GFLOP/s), so the compute
-bound is about 55 ms per frame. ONNX Runtime 1.32 measured slower on these convolutions
-(109 against 162 GFLOP/s, 141 against 280 for the group CNN's 3 x 3, one thread). Two threads
-on a machine shared with other work run erratically slowly (OpenMP threads wait on each
-other): one thread is the robust choice there.
+Speed: `safl-bench bench bevplace --reference DIR --bev-root DIR` times this against the
+authors' code side by side and against the compute bound at the convolution rate measured in
+the same run (see `baselines.bevplace_bench`). Work: 13.2 G multiply-adds per frame (the
+authors' network; 57 % in the group CNN, 841 points x 25 cells, the rest in the per-copy CNN
+over 213k canvas pixels); convolutions are about 90 % of the fast path's time.
+Figures on the current host (AVX2, no AVX-512): see `bench bevplace`.
+Earlier figures (another host of the development machine, with AVX-512; 2 threads, median of
+15): 78 ms per frame at batch 1, 13.5 frames/s batched (batch_size 4); the plain port
+110-130 ms; one thread: 153 ms (plain 200-275 ms); a 16 -> 32 5 x 5 channels-last convolution
+at about 475 GFLOP/s, a bound of about 55 ms per frame. ONNX Runtime 1.32 measured slower on
+these convolutions (109 against 162 GFLOP/s, 141 against 280 for the group CNN's 3 x 3, one
+thread). Two threads on a machine shared with other work run erratically slowly (OpenMP threads
+wait on each other): one thread is the robust choice there.
 """
 
 from __future__ import annotations
@@ -671,7 +682,7 @@ class BevPlace(Method):
     bench_view_size: ClassVar[int] = 151
     #: Runs the authors' published weights, shipped with the package; not trained here.
     ships_weights: ClassVar[bool] = True
-    #: `fast` changes descriptors by < 1e-6 (tested < 1e-4), `batch_size` not at all.
+    #: `fast` changes descriptors by < 1e-6 (tested < 1e-5), `batch_size` not at all.
     runtime_params: ClassVar[tuple[str, ...]] = ("batch_size", "fast")
 
     def __init__(self, batch_size: int = 4, fast: bool = True):
