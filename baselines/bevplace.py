@@ -95,14 +95,18 @@ the same run (see `baselines.bevplace_bench`). Work: 13.2 G multiply-adds per fr
 authors' network; 57 % in the group CNN, 841 points x 25 cells, the rest in the per-copy CNN
 over 213k canvas pixels); convolutions are about 90 % of the fast path's time.
 Figures on the current host of the 2-core AMD EPYC development machine (AVX2 and FMA only:
-no AVX-512, so no bf16 either; one torch thread, batch_size 4, 8 real KITTI 00 images, median
-of 3 interleaved rounds, load average 9 from other work): 517 CPU ms per frame batched (532 at
-batch 1) against 699 for the authors' code batched (598 at batch 1): 1.33x the authors'
-throughput (1.05x at batch 1); 1.08x the compute bound (13.23 G multiply-adds at the
-network's fastest convolution shape's rate in the same run). The authors' code runs the same
-oneDNN convolutions, which are 85-90 % of either's time, so on this CPU 2x its throughput
-would need fewer multiply-adds than the network has; the bound is the target reached. The fused
-instance-norm kernel made the fast path 1.2x faster (median of 5 rounds, one thread).
+no AVX-512, so no bf16 either), one torch thread, batch_size 4, real KITTI 00 images, medians of
+3 interleaved rounds at load average 9-11 from other work (wall times there are 6-7x the CPU
+times, so CPU time is the robust figure):
+  - 8 images: ours 517 CPU ms per frame batched (532 at batch 1), the authors' code 699 (598):
+    1.33x the authors' throughput by wall time, 1.34x by CPU time;
+  - 4 images: ours 444 CPU ms batched (474 at batch 1), the authors' code 572 (527): 1.34x by
+    wall time, 1.29x by CPU time; the bound 13.23 G multiply-adds at 73.5 GFLOP/s per
+    CPU-second (the network's fastest convolution shape, same run) = 360 CPU ms: ours 1.23x it.
+The authors' code runs the same oneDNN convolutions, which are 85-90 % of either's time, so on
+this CPU 2x its throughput would need fewer multiply-adds than the network has; the bound
+(at most 1.3x) is the target reached. The fused instance-norm kernel alone made the fast path
+1.2x faster (median of 5 interleaved rounds, one thread).
 Earlier figures (another host of the development machine, with AVX-512; 2 threads, median of
 15): 78 ms per frame at batch 1, 13.5 frames/s batched (batch_size 4); the plain port
 110-130 ms; one thread: 153 ms (plain 200-275 ms); a 16 -> 32 5 x 5 channels-last convolution
