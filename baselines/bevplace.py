@@ -103,9 +103,10 @@ times, so CPU time is the robust figure):
   - 4 images: ours 444 CPU ms batched (474 at batch 1), the authors' code 572 (527): 1.34x by
     wall time, 1.29x by CPU time; the bound 13.23 G multiply-adds at 73.5 GFLOP/s per
     CPU-second (the network's fastest convolution shape, same run) = 360 CPU ms: ours 1.23x it.
-The authors' code runs the same oneDNN convolutions, which are 85-90 % of either's time, so on
-this CPU 2x its throughput would need fewer multiply-adds than the network has; the bound
-(at most 1.3x) is the target reached. The fused instance-norm kernel alone made the fast path
+The authors' code runs the same network's convolutions through the same oneDNN (about 90 % of
+the fast path's time; the authors' code is itself within about 1.6x of the bound), so on this
+CPU 2x its throughput would need fewer multiply-adds than the network has; the bound (at most
+1.3x) is the target reached. The fused instance-norm kernel alone made the fast path
 1.2x faster (median of 5 interleaved rounds, one thread).
 Earlier figures (another host of the development machine, with AVX-512; 2 threads, median of
 15): 78 ms per frame at batch 1, 13.5 frames/s batched (batch_size 4); the plain port
