@@ -335,7 +335,7 @@ def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
         records, tmp_path, training_logs=REPO_BOARD / "training-logs", skipped=problems,
         preset_records=load_preset_records(REPO_BOARD)[0],
     )
-    _committed(tmp_path, ("tables", "figures"))
+    _committed(tmp_path, ("tables", "figures", "site"))
     assert (tmp_path / "index.md").read_bytes() == (REPO_BOARD / "index.md").read_bytes()
 
 
