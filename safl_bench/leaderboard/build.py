@@ -140,7 +140,8 @@ def build_leaderboard(
     with other matcher presets (kept in their own folders, since a record's path does not name
     its preset); each paper-protocol table of the top-view images gains a table by preset.
     `site`: also write the web pages (`safl_bench.leaderboard.site`; `records_folder(record)`
-    names the folder each record was read from, for their provenance). Raises DataError when
+    names the folder each record was read from, for their provenance; by default the
+    committed layout, leaderboard/records and leaderboard/preset-records/<preset>). Raises DataError when
     there are no records, so an empty results directory never wipes a leaderboard.
     """
     if not records:
@@ -254,9 +255,10 @@ def build_leaderboard(
                    report.headline_robust, report.headline_records)
     writer.text("index.md", index)
     if site:
-        from safl_bench.leaderboard.site import write_site
+        from safl_bench.leaderboard.site import default_records_folder, write_site
 
-        report.written += write_site(report, records_folder=records_folder, problems=skipped,
+        folder = records_folder or default_records_folder(preset_records)
+        report.written += write_site(report, records_folder=folder, problems=skipped,
                                      problem_base=skipped_base)
     report.removed = _remove_stale(out, report.written)
     return report

@@ -90,6 +90,19 @@ class _Page:
     tables: list[PublishedTable]
 
 
+def default_records_folder(preset_records: Sequence[ResultRecord] = ()) -> RecordFolder:
+    """The committed layout: leaderboard/records, and leaderboard/preset-records/<preset> for
+    `preset_records` (the records of other matcher presets)."""
+    presets = {id(r) for r in preset_records}
+
+    def folder(record: ResultRecord) -> str:
+        if id(record) in presets:
+            return f"leaderboard/preset-records/{_preset(record)}"
+        return "leaderboard/records"
+
+    return folder
+
+
 def page_file(key: TableKey) -> str:
     """The page of a table group, e.g. 'kitti-top-view-images-revisit-v0.html'."""
     return f"{key.source_slug}-{key.stem}.html"
@@ -104,13 +117,13 @@ def write_site(
 ) -> list[Path]:
     """Write the site for `report` into `report.out_dir / "site"`; returns the files written.
 
-    `records_folder(record)` names the folder a record was read from (default: "<out>/records"
-    by the leaderboard directory's name). `problems`: record files that could not be used; each
+    `records_folder(record)` names the folder a record was read from (default:
+    `default_records_folder()`, leaderboard/records). `problems`: record files that could not be used; each
     is named on every page, relative to `problem_base` when given.
     """
     out = Path(report.out_dir)
     site = out / SITE_DIR
-    folder = records_folder or (lambda _record: f"{out.name}/records")
+    folder = records_folder or default_records_folder()
     groups: dict[TableKey, list[PublishedTable]] = defaultdict(list)
     for published in report.tables:
         groups[published.key].append(published)
