@@ -188,3 +188,16 @@ def test_slow_docs_command_runs(block: Block, small_data: dict[str, Path]) -> No
     """Slow blocks run on this machine's own $SAFL_HOME (the synthetic default is generated or
     reused there), in a scratch folder, KITTI lines on the small KITTI folder."""
     _run(block, small_data["work"], _env(None), small_data["kitti"])
+
+
+def test_the_cli_reference_page_is_printed_by_the_parser() -> None:
+    from safl_bench.cli import COMMANDS
+    from safl_bench.cli.reference import cli_reference_markdown
+
+    page = cli_reference_markdown()
+    for name, target in COMMANDS.items():
+        words = [f"{name} {sub}" for sub in target] if isinstance(target, dict) else [name]
+        for command in words:
+            assert f"`safl-bench {command}`" in page
+    assert "--no-site" in page and "--bev-root" in page  # options come from the parser itself
+    assert "<!-- cli-reference -->" in (REPO / "docs" / "reference" / "cli.md").read_text()

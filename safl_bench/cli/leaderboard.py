@@ -19,7 +19,7 @@ from safl_bench.leaderboard.headline import update_readme
 from safl_bench.matcher_presets import label
 from safl_bench.records import Problem, ResultRecord, load_records
 
-HELP = "regenerate the leaderboard (Markdown/CSV tables and PNG figures) from result records"
+HELP = "regenerate the leaderboard (Markdown/CSV tables, PNG figures, web pages) from result records"
 
 
 def default_out_dir(cwd: Path | None = None) -> Path:
