@@ -10,8 +10,8 @@ before a block may say how it is run:
     <!-- docs-test: slow REASON -->   run only with `pytest -m slow`, on the machine's own
                                        $SAFL_HOME (e.g. the synthetic default, minutes)
 
-Blocks without a comment run in the default test run, each command as a process in a scratch
-folder that holds the small data the tests make: BEVPlace-layout images at
+Blocks without a comment run in the default test run, each command through the CLI's entry
+point (Python blocks in a fresh interpreter) in a scratch folder that holds the small data the tests make: BEVPlace-layout images at
 `BEVPlace/data/KITTI` (sequences 00, 02), a KITTI odometry folder standing in for `/data/kitti`
 (00, 09), and leaderboard records at `leaderboard/records`; $SAFL_HOME is a scratch folder too.
 Every command must exit 0.
@@ -32,6 +32,7 @@ from conftest import write_bev, write_kitti
 from site_board import write_board
 
 from safl_bench.cli import build_parser
+from safl_bench.cli import main as cli_main
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
@@ -151,21 +152,28 @@ def small_data(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"work": work, "kitti": kitti, "home": work / "home"}
 
 
-def _run(block: Block, cwd: Path, env: dict[str, str], kitti: Path | None) -> None:
+def _run(block: Block, cwd: Path, env: dict[str, str], kitti: Path | None,
+         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Python blocks in a fresh interpreter (they register methods); safl-bench commands in this
+    process, as `safl-bench` runs them (`cli.main`), in `cwd` with `env`."""
     if block.lang == "python":
         done = subprocess.run([sys.executable, "-c", block.text], cwd=cwd, env=env,
                               capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, f"{block.where}: the Python block failed:\n{done.stderr[-3000:]}"
         return
+    monkeypatch.chdir(cwd)
+    for name in set(os.environ) - set(env):
+        monkeypatch.delenv(name)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
     for words in block.commands():
         argv = _cli_args(words)
         if kitti is not None:
             argv = [a.replace(KITTI_PLACEHOLDER, str(kitti)) for a in argv]
-        done = subprocess.run([sys.executable, "-m", "safl_bench", *argv], cwd=cwd, env=env,
-                              capture_output=True, text=True, timeout=1800)
-        assert done.returncode == 0, (
-            f"{block.where}: `{' '.join(words)}` exited {done.returncode}:\n"
-            f"{done.stdout[-2000:]}\n{done.stderr[-3000:]}")
+        code = cli_main(argv)
+        out = capsys.readouterr()
+        assert code == 0, (f"{block.where}: `{' '.join(words)}` exited {code}:\n"
+                           f"{out.out[-2000:]}\n{out.err[-3000:]}")
 
 
 def _env(home: Path | None) -> dict[str, str]:
@@ -178,16 +186,18 @@ def _env(home: Path | None) -> dict[str, str]:
 
 
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.mode == "run"], ids=lambda b: b.where)
-def test_docs_command_runs_on_small_data(block: Block, small_data: dict[str, Path]) -> None:
-    _run(block, small_data["work"], _env(small_data["home"]), small_data["kitti"])
+def test_docs_command_runs_on_small_data(block: Block, small_data: dict[str, Path],
+                                        monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    _run(block, small_data["work"], _env(small_data["home"]), small_data["kitti"], monkeypatch, capsys)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("block", [b for b in BLOCKS if b.mode == "slow"], ids=lambda b: b.where)
-def test_slow_docs_command_runs(block: Block, small_data: dict[str, Path]) -> None:
+def test_slow_docs_command_runs(block: Block, small_data: dict[str, Path],
+                               monkeypatch: pytest.MonkeyPatch, capsys) -> None:
     """Slow blocks run on this machine's own $SAFL_HOME (the synthetic default is generated or
     reused there), in a scratch folder, KITTI lines on the small KITTI folder."""
-    _run(block, small_data["work"], _env(None), small_data["kitti"])
+    _run(block, small_data["work"], _env(None), small_data["kitti"], monkeypatch, capsys)
 
 
 def test_the_cli_reference_page_is_printed_by_the_parser() -> None:
