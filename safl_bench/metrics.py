@@ -372,8 +372,8 @@ def true_place_ranks(
                         f"{Dm.shape} and {len(true_places)}")
     nq, ndb = Dm.shape
     limit = np.full(nq, ndb, np.int64) if db_limit is None else np.asarray(db_limit, np.int64)
-    ranks = np.zeros(nq, np.int64)
-    cols = np.arange(ndb)
+    best = np.zeros(nq, Dm.dtype)
+    jbest = np.full(nq, -1, np.int64)  # -1: no true place
     for i, js in enumerate(true_places):
         js = np.asarray(js, dtype=np.int64)
         if js.size == 0:
@@ -381,12 +381,18 @@ def true_place_ranks(
         if js.min() < 0 or js.max() >= limit[i]:
             raise DataError(f"query {i}: a true place {js.max()} is not a candidate "
                             f"(candidates: j < {limit[i]})")
-        row = Dm[i, :limit[i]]
-        vals = row[js]
+        vals = Dm[i, js]
         k = int(np.argmin(vals))  # first minimum; `js` is sorted, so the lowest index
-        best, jbest = vals[k], js[k]
-        nearer = (row < best) | ((row == best) & (cols[:limit[i]] < jbest))
-        ranks[i] = int(np.count_nonzero(nearer)) + 1
+        best[i], jbest[i] = vals[k], js[k]
+    ranks = np.zeros(nq, np.int64)
+    cols = np.arange(ndb)
+    rows = np.flatnonzero(jbest >= 0)
+    for start in range(0, rows.size, 256):  # row blocks: a few MB at a time
+        r = rows[start:start + 256]
+        b, jb = best[r, None], jbest[r, None]
+        nearer = (Dm[r] < b) | ((Dm[r] == b) & (cols < jb))
+        nearer &= cols < limit[r, None]
+        ranks[r] = np.count_nonzero(nearer, axis=1) + 1
     return ranks
 
 
