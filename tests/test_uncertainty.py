@@ -99,3 +99,30 @@ def test_paired_differences_resolve_a_better_method_and_tie_a_method_with_itself
     assert same["f1_max"].mean == 0 and not same["f1_max"].excludes_zero()
     with pytest.raises(DataError, match="same seeds"):
         uncertainty.paired_difference(good, bad[:2])
+
+
+def test_compare_prints_paired_differences_and_a_verdict(tmp_path, capsys) -> None:
+    import dataclasses
+
+    from record_factory import make_record
+
+    from safl_bench.cli import main
+    from safl_bench.records import mode_result_from_evaluation, write_record
+
+    for name, skill in (("good", 0.9), ("bad", 0.3)):
+        for seed in (0, 1):
+            o = random_outcomes(seed, skill=skill)
+            # same queries on both sides: positives and candidates of seed `seed`
+            base = random_outcomes(seed, skill=0.9)
+            o = metrics.Outcomes(o.confidence, np.where(base.has_true_place, o.label, -1).astype(np.int8),
+                                 base.has_true_place, base.has_candidate,
+                                 np.where(base.has_true_place, np.maximum(o.true_rank, 1), 0))
+            mode = mode_result_from_evaluation(metrics.evaluate_outcomes(o), o)
+            rec = make_record(name, seed=seed)
+            write_record(tmp_path, dataclasses.replace(rec, results={"sequence": mode,
+                                                                     "single_frame": mode}))
+    assert main(["compare", "--method", "good", "--method", "bad", "--results", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "seeds 0, 1" in out and "A - B" in out
+    assert "verdict: A better on" in out and "recall_at_1" in out.split("verdict:")[1]
+    assert main(["compare", "--method", "good", "--results", str(tmp_path)]) == 2
