@@ -50,11 +50,18 @@ from safl_bench.leaderboard.tables import (
     time_table,
 )
 from safl_bench.leaderboard.training_logs import TrainingLog, load_training_logs
+from safl_bench.metrics import METRICS_VERSION
 from safl_bench.records import Problem, ResultRecord
 
 GENERATED_DIRS = ("tables", "figures", "site")
 GENERATED_SUFFIXES = (".md", ".csv", ".png", ".html")
 UNKNOWN_SOURCE = "data source not recorded in the log"
+#: What every table showing a recall says about it (`safl_bench.metrics` defines each measure).
+RECALL_NOTE = (
+    f"Recall is over the queries with a true place (the same for every method on a task: fixed "
+    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.metrics`); recall over "
+    "correct matches (the paper's authors' and VPR-Bench's convention) is in the `_of_correct` "
+    "columns of tables/all-results.csv.")
 
 
 @dataclass
@@ -155,13 +162,13 @@ def build_leaderboard(
     groups, group_notes = group_records(records)
     entries: list[_Entry] = []
     for key, group in groups.items():
-        notes = group_notes.get(key, [])
+        notes = [RECALL_NOTE, *group_notes.get(key, [])]
         base = f"{key.source_slug}/{key.stem}"
         entry = _Entry(key)
         if key.protocol == "paper":
             recall = recall_table(key, group, notes)
             auc = auc_table(key, group, notes)
-            timing = time_table(key, group, notes)
+            timing = time_table(key, group, notes[1:])
             heatmap = f"figures/{base}-auc-heatmap.png"
             f1 = paper_metric_table(key, group, metric="f1_max", title="F1max", fmt=F1_FORMAT,
                                     notes=notes)
@@ -187,7 +194,8 @@ def build_leaderboard(
                     ("recall_at_1", "presets-recall-at-1", "Recall@1 (%)"),
                 ):
                     by_preset = preset_table(key, [*group, *presets], metric=metric,
-                                             title=f"Sequence matcher by preset: {title}")
+                                             title=f"Sequence matcher by preset: {title}",
+                                             notes=[RECALL_NOTE])
                     md = by_preset.markdown(level=1)
                     rel = writer.text(f"tables/{base}-{stem}.md", md)
                     entry.tables.append((f"by matcher preset, {title}", rel))
