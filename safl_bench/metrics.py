@@ -45,33 +45,18 @@ the method's wrong answers; ours keeps P fixed (their precision equals ours at e
 
 The measures (each a fraction in [0, 1]; in a record's ``metrics``):
 
-============================== ============================================== =============
-name                           definition                                     denominator
-============================== ============================================== =============
-recall_at_100_precision        max R(tau) over thresholds with FP(tau) = 0    P
-                               (0 when the most confident match is wrong)
-recall_at_100_precision_       the same in Rc                                 C
-of_correct
-recall_at_precision[_of_       max R (Rc) over thresholds with precision      P (C)
-correct] (`evaluate` only)     >= ``precision_level`` (the authors' 0.99)
-f1_max                         max over tau of 2 Pr R / (Pr + R)              P
-f1_max_of_correct              the same with Rc                               C
-extended_precision             (P_R0 + R_P100) / 2 (Ferrarini et al.):        P
-                               P_R0 = precision at the most confident
-                               threshold, R_P100 = recall_at_100_precision
-extended_precision_of_correct  the same with Rc: VPR-Bench's                  C
-                               ``compute_extendedprecision`` (lines 105-113)
-auc                            ROC AUC of "is the reported match correct"     queries with
-                               by confidence (``roc_auc_score``): positives   a candidate,
-                               = correct matches, negatives = wrong matches   less ambiguous
-                               and queries that reported none (ranked below   matches
-                               all others). The paper's Eq. 14. None with
-                               one class only.
-recall_at_1                    correct reported matches / P (= R at the       P
-                               lowest threshold: accept everything)
-recall_at_n {"N"}              queries with ``1 <= true_rank <= N`` / P       P
-                               (single-frame mode only)
-============================== ============================================== =============
+| name | definition | denominator |
+|---|---|---|
+| ``recall_at_100_precision`` | max R(tau) over the thresholds with FP(tau) = 0 (0 when the most confident match is wrong) | P |
+| ``recall_at_100_precision_of_correct`` | the same in Rc | C |
+| ``recall_at_precision[_of_correct]`` (`evaluate` only) | max R (Rc) over the thresholds with precision >= ``precision_level`` (the authors' 0.99) | P (C) |
+| ``f1_max`` | max over tau of 2 Pr R / (Pr + R) | P |
+| ``f1_max_of_correct`` | the same with Rc | C |
+| ``extended_precision`` | (P_R0 + R_P100) / 2 (Ferrarini et al.): P_R0 = precision at the most confident threshold, R_P100 = ``recall_at_100_precision`` | P |
+| ``extended_precision_of_correct`` | the same with Rc: VPR-Bench's ``compute_extendedprecision`` (lines 105-113) | C |
+| ``auc`` | ROC AUC of "is the reported match correct" by confidence (``roc_auc_score``): positives = correct matches, negatives = wrong matches and queries that reported none (ranked below all others); the paper's Eq. 14; None with one class only | queries with a candidate, less ambiguous matches |
+| ``recall_at_1`` | correct reported matches / P (= R at the lowest threshold: accept everything) | P |
+| ``recall_at_n`` {"N"} | queries with ``1 <= true_rank <= N`` / P (single-frame mode only) | P |
 
 Ties (one rule everywhere). Equal distances are ordered by the LOWER database index, in the
 matcher's precision (``MatcherConfig.dtype``, float32 by default): the matcher keeps the first
