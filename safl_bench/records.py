@@ -335,13 +335,29 @@ def rerun_command(record: ResultRecord) -> str:
             f"--task {record.task.id} --seed {record.seed}{root} --force")
 
 
+def unchanged_by_version_2(record: ResultRecord) -> bool:
+    """Whether a metrics-version-1 record's measures are version 2's: version 2 changed only
+    what an ambiguous match (a band between the true- and false-positive radii) and a query
+    without a candidate (a time window) count as, and a task with neither is scored the same
+    by both (measured: every paper- and BEVPlace-protocol cell of SAD, BiGAN and Stable-AFL
+    recomputed to the same values). Such a record lacks only the measures version 2 added."""
+    spec = record.task.spec
+    return (record.metrics_version == 1 and spec.get("window_s") is None
+            and spec.get("tp_radius_m") is not None
+            and spec.get("tp_radius_m") == spec.get("fp_radius_m"))
+
+
 def rescore(record: ResultRecord) -> ResultRecord:
     """`record` with its measures and curves under this code's metrics version: recomputed from
-    the per-query outcomes it holds (unchanged when it already is of this version). Raises
-    OutdatedRecordError for an older record without outcomes (metrics version 1)."""
+    the per-query outcomes it holds (unchanged when it already is of this version, or when it
+    is a version-1 record whose measures version 2 did not change: `unchanged_by_version_2`,
+    kept with its version so that it says what it lacks). Raises OutdatedRecordError for any
+    other older record without outcomes."""
     if record.metrics_version == METRICS_VERSION:
         return record
     if any(mode.queries is None for mode in record.results.values()):
+        if unchanged_by_version_2(record):
+            return record
         raise OutdatedRecordError(
             f"scored with metrics version {record.metrics_version} (this code: "
             f"{METRICS_VERSION}) and holds no per-query outcomes to rescore; recompute it: "

@@ -143,15 +143,16 @@ def _existing(
                 return seed, CellOutcome(registered.id, seed, "reused", path, old, method=info.name)
             if not why:
                 try:
-                    new = rescore(old)
+                    new: ResultRecord | None = rescore(old)
                 except OutdatedRecordError:
-                    log(f"note: {path} was scored with metrics version {old.metrics_version} "
-                        f"(this code: {METRICS_VERSION}) and holds no per-query outcomes; "
-                        "recomputing it (its timings are kept)")
-                else:
+                    new = None
+                if new is not None and new.metrics_version == METRICS_VERSION:
                     written = write_record(options.results_dir, new)
                     return seed, CellOutcome(registered.id, seed, "rescored", written, new,
                                              method=info.name)
+                log(f"note: {path} was scored with metrics version {old.metrics_version} "
+                    f"(this code: {METRICS_VERSION}) and holds no per-query outcomes; "
+                    "recomputing it (its timings are kept)")
             else:
                 log(f"note: {path} was made with other settings ({why}); recomputing it")
     pending = evaluated_path(options.results_dir, info.name, info.version, registered.id, seed)
