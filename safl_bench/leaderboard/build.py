@@ -128,6 +128,18 @@ class _Writer:
         return rel
 
 
+def _version_1_note(group: Sequence[ResultRecord]) -> list[str]:
+    """A note naming the rows that come from metrics-version-1 records (kept because version 2
+    scores their task the same: `safl_bench.records.unchanged_by_version_2`)."""
+    old = sorted({f"{r.method.name} v{r.method.version}" for r in group if r.metrics_version == 1})
+    if not old:
+        return []
+    return [f"Rows of {', '.join(old)} come from metrics-version-1 records: version 2 scores this "
+            "protocol the same (no ambiguous band, no time window), but they hold no per-query "
+            "outcomes, so they have no `_of_correct` measures and no intervals; `safl-bench run "
+            "--force` recomputes them."]
+
+
 def build_leaderboard(
     records: Sequence[ResultRecord],
     out_dir: str | os.PathLike[str],
@@ -162,7 +174,7 @@ def build_leaderboard(
     groups, group_notes = group_records(records)
     entries: list[_Entry] = []
     for key, group in groups.items():
-        notes = [RECALL_NOTE, *group_notes.get(key, [])]
+        notes = [RECALL_NOTE, *_version_1_note(group), *group_notes.get(key, [])]
         base = f"{key.source_slug}/{key.stem}"
         entry = _Entry(key)
         if key.protocol == "paper":
