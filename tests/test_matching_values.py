@@ -1,0 +1,1 @@
+"""Exact values of `safl_bench.matching` on small hand-made cases."""

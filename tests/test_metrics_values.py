@@ -1,0 +1,1 @@
+"""Exact values of `safl_bench.metrics` on small hand-made cases."""
