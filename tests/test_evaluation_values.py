@@ -67,7 +67,7 @@ def revisit_truth() -> GroundTruth:
                                 dict(max_frames="3"), dict(trim_queries=-1),
                                 dict(trim_queries=True), dict(trim_queries=1.0)])
 def test_bad_evaluation_settings(kw: dict) -> None:
-    with pytest.raises(ConfigError, match="max_frames|trim_queries"):
+    with pytest.raises(ConfigError, match=r"^(max_frames|trim_queries) must be"):
         EvaluationConfig(**kw)
 
 
@@ -289,7 +289,7 @@ def test_scored_queries() -> None:
     assert scored_queries(10, 3) == slice(3, 7)
     assert scored_queries(3, 1) == slice(1, 2)
     for n, trim in ((10, 5), (2, 1), (3, 2)):
-        with pytest.raises(ConfigError, match=f"^trim_queries={trim} leaves none of the {n} "):
+        with pytest.raises(ConfigError, match=rf"^trim_queries={trim} leaves none of the {n} "):
             scored_queries(n, trim)
 
 

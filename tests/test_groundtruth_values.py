@@ -105,7 +105,7 @@ def test_candidates_that_are_not_a_prefix_are_refused() -> None:
     # database not in time order: frame 0 is younger than frame 1
     gt = GroundTruth(line([0]), line([0, 0]), np.array([10.0]), np.array([9.5, 1.0]), 1.0, 1.0,
                      window_s=2.0)
-    with pytest.raises(ConfigError, match="^the candidates of some query are not a prefix"):
+    with pytest.raises(ConfigError, match=r"^the candidates of some query are not a prefix"):
         gt.db_limit()
 
 
@@ -114,13 +114,13 @@ def test_ground_truth_checks() -> None:
     for name, kw in [("true-positive radius", dict(tp_radius=-1.0, fp_radius=1.0)),
                      ("true-positive radius", dict(tp_radius=np.inf, fp_radius=np.inf)),
                      ("false-positive radius", dict(tp_radius=1.0, fp_radius=np.nan))]:
-        with pytest.raises(ConfigError, match=f"^{name} must be a finite distance >= 0 m"):
+        with pytest.raises(ConfigError, match=rf"^{name} must be a finite distance >= 0 m"):
             GroundTruth(xy, xy, t, t, **kw)
     with pytest.raises(ConfigError, match=r"^false-positive radius 2.0 m is below the "
                                           r"true-positive radius 3.0 m$"):
         GroundTruth(xy, xy, t, t, 3.0, 2.0)
     for window in (-0.1, np.inf, np.nan):
-        with pytest.raises(ConfigError, match="^time window must be a finite number"):
+        with pytest.raises(ConfigError, match=r"^time window must be a finite number"):
             GroundTruth(xy, xy, t, t, 1.0, 1.0, window_s=window)
     with pytest.raises(ConfigError, match=r"^ground truth needs \(n, 2\) positions"):
         GroundTruth(np.zeros((2, 3)), xy, t, t, 1.0, 1.0)
@@ -164,11 +164,11 @@ def test_loop_pairs_at_the_boundaries() -> None:
     assert loop_pairs(pos, times, 0.4, 0.0).tolist() == [[3, 0]]
     assert loop_pairs(pos, times, 10.0, 0.0).shape == (10, 2)
     assert loop_pairs(line([0, 100]), times[:2], 1.0, 0.0).shape == (0, 2)
-    with pytest.raises(ConfigError, match="^radius must be a finite distance"):
+    with pytest.raises(ConfigError, match=r"^radius must be a finite distance"):
         loop_pairs(pos, times, np.inf, 0.0)
-    with pytest.raises(ConfigError, match="^minimum time gap must be a finite number"):
+    with pytest.raises(ConfigError, match=r"^minimum time gap must be a finite number"):
         loop_pairs(pos, times, 1.0, -1.0)
-    with pytest.raises(ConfigError, match="^minimum time gap must be a finite number"):
+    with pytest.raises(ConfigError, match=r"^minimum time gap must be a finite number"):
         loop_pairs(pos, times, 1.0, np.inf)
     with pytest.raises(ConfigError, match=r"^need \(n, 2\) positions and n times"):
         loop_pairs(np.zeros((5, 3)), times, 1.0, 0.0)

@@ -182,13 +182,13 @@ def test_shapes_must_match_the_confidences() -> None:
 
 
 def test_confidence_checks() -> None:
-    with pytest.raises(DataError, match="^nothing to evaluate: no queries$"):
+    with pytest.raises(DataError, match=r"^nothing to evaluate: no queries$"):
         metrics.outcomes(0.5, [T], [T])  # a scalar is no queries
-    with pytest.raises(DataError, match="^nothing to evaluate: no queries$"):
+    with pytest.raises(DataError, match=r"^nothing to evaluate: no queries$"):
         metrics.outcomes([], [], [])
     with pytest.raises(DataError, match=r"^confidence must be 1-D"):
         metrics.outcomes([[0.5]], [T], [T])
-    with pytest.raises(DataError, match="^confidence has 2 NaN values$"):
+    with pytest.raises(DataError, match=r"^confidence has 2 NaN values$"):
         metrics.outcomes([np.nan, 0.1, np.nan], [F, F, F], [T, T, T])
     with pytest.raises(DataError, match=r"^confidence has \+inf values \(a score of -inf\?\)$"):
         metrics.outcomes([np.inf, 0.1], [F, F], [T, T])
@@ -197,11 +197,11 @@ def test_confidence_checks() -> None:
 
 
 def test_inconsistent_labels_are_errors_naming_the_problem() -> None:
-    with pytest.raises(DataError, match="^a reported match is marked both correct and ambiguous$"):
+    with pytest.raises(DataError, match=r"^a reported match is marked both correct and ambiguous$"):
         metrics.outcomes([0.5], [T], [T], ambiguous=[T])
-    with pytest.raises(DataError, match="^a query is marked correct but has no true place$"):
+    with pytest.raises(DataError, match=r"^a query is marked correct but has no true place$"):
         metrics.outcomes([0.5], [T], [F])
-    with pytest.raises(DataError, match="^a query has a true place but no candidate$"):
+    with pytest.raises(DataError, match=r"^a query has a true place but no candidate$"):
         metrics.outcomes([0.5], [F], [T], has_candidate=[F])
     # a query without a candidate and without a true place is fine
     o = metrics.outcomes([0.5, 0.4], [F, T], [F, T], has_candidate=[F, T])
@@ -210,14 +210,14 @@ def test_inconsistent_labels_are_errors_naming_the_problem() -> None:
 
 @pytest.mark.parametrize("rank", [[1, -1], [1.0, 0.0], [[1, 0]], [1]])
 def test_true_rank_must_be_integers_of_the_right_shape(rank: list) -> None:
-    with pytest.raises(DataError, match="^true_rank must be integers >= 0"):
+    with pytest.raises(DataError, match=r"^true_rank must be integers >= 0"):
         metrics.outcomes([0.5, 0.4], [T, F], [T, F], true_rank=rank)
 
 
 def test_true_rank_must_be_positive_exactly_where_a_true_place_is() -> None:
-    with pytest.raises(DataError, match="^true_rank must be >= 1 exactly where"):
+    with pytest.raises(DataError, match=r"^true_rank must be >= 1 exactly where"):
         metrics.outcomes([0.5, 0.4], [T, F], [T, F], true_rank=[1, 2])
-    with pytest.raises(DataError, match="^true_rank must be >= 1 exactly where"):
+    with pytest.raises(DataError, match=r"^true_rank must be >= 1 exactly where"):
         metrics.outcomes([0.5, 0.4], [T, F], [T, F], true_rank=[0, 0])
     o = metrics.outcomes([0.5, 0.4], [T, F], [T, F], true_rank=np.array([3, 0], np.int32))
     assert o.true_rank is not None and o.true_rank.dtype == np.int64
@@ -226,7 +226,7 @@ def test_true_rank_must_be_positive_exactly_where_a_true_place_is() -> None:
 def test_no_positive_among_the_scored_queries_is_an_error() -> None:
     # the only query with a true place has a candidate; the scored one has none
     with pytest.raises(metrics.NoPositivesError,
-                       match="^no query has a true place among 3 queries "
+                       match=r"^no query has a true place among 3 queries "
                              r"\(2 with a candidate\): recall is undefined$"):
         metrics.evaluate([0.5, 0.4, NINF], [F, F, F], [F, F, F], has_candidate=[T, T, F])
 
