@@ -102,10 +102,13 @@ def test_settings_record_and_read_back() -> None:
     # a record made before the evaluation-level settings existed
     old = {"sequence": MatcherConfig().to_dict()}
     assert EvaluationConfig.from_dict(old) == EvaluationConfig()
-    for bad in (None, [], {"single_frame": {}}, {"sequence": 3},
-                {"sequence": {}, "evaluation": {"max_frames": 1, "other": 0}},
+    for bad in (None, [], {"single_frame": {}}, {"sequence": 3}):
+        with pytest.raises(ConfigError, match=r"^matcher settings need a 'sequence' mapping, got "):
+            EvaluationConfig.from_dict(bad)  # type: ignore[arg-type]
+    for bad in ({"sequence": {}, "evaluation": {"max_frames": 1, "other": 0}},
                 {"sequence": {}, "evaluation": [1]}):
-        with pytest.raises(ConfigError):
+        with pytest.raises(ConfigError, match=r"^evaluation settings: expected keys of "
+                                              r"\['max_frames', 'trim_queries'\], got "):
             EvaluationConfig.from_dict(bad)  # type: ignore[arg-type]
 
 

@@ -146,6 +146,8 @@ def test_labels_checks() -> None:
     with pytest.raises(ConfigError, match=r"^match indices must lie in \[0, 3\), got 0\.\.3$"):
         gt.labels(np.array([0, 3]))
     assert gt.labels(np.array([2, 0])).tolist() == [FP, TP]  # 2 m, 1 m
+    assert gt.labels(np.array([2.0, 0.0])).tolist() == [FP, TP]  # frame numbers as floats
+    assert gt.labels([1, 1]).tolist() == [TP, TP]
 
 
 def test_loop_pairs_at_the_boundaries() -> None:
@@ -190,6 +192,7 @@ def test_camera_ground_positions_take_x_and_z() -> None:
     out = camera_ground_positions(poses)
     assert out.tolist() == [[1.0, 3.0], [4.0, 6.0]] and out.flags.c_contiguous
     assert camera_ground_positions(poses[:, :3]).tolist() == [[1.0, 3.0], [4.0, 6.0]]
+    assert camera_ground_positions(poses.astype(np.float32)).dtype == np.float64
 
 
 def test_read_poses_and_times(tmp_path: Path) -> None:

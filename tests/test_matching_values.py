@@ -5,6 +5,7 @@ shift, db_limit, and every setting check."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -156,13 +157,23 @@ def test_inverse_score_by_hand() -> None:
 
 
 def test_inverse_score_reads_the_trajectory_sum() -> None:
-    best_s = np.array([0.5, 0.4, -1.0, np.inf, 0.0])
-    n_terms = np.array([3, 2, 2, 3, 1])
-    found = np.array([True, True, True, False, True])
-    score, capped = matching._inverse_score(best_s, n_terms, found)
-    # sums 1.5, 0.8, -2, -, 0: 1/sum = .667, 1.25 (capped), -.5, -, inf (capped)
-    np.testing.assert_allclose(score, [-1 / 1.5, -1.0, 0.5, np.inf, -1.0])
-    assert capped.tolist() == [False, True, False, False, True]
+    best_s = np.array([0.5, 0.4, -1.0, np.inf, 0.0, 0.5, -0.0])
+    n_terms = np.array([3, 2, 2, 3, 1, 2, 1])
+    found = np.array([True, True, True, False, True, True, True])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 1 / 0 is the cap, not a warning
+        score, capped = matching._inverse_score(best_s, n_terms, found)
+    # sums 1.5, 0.8, -2, -, 0, 1, -0: 1/sum = .667, 1.25 (capped), -.5, -, inf (capped), 1 (not
+    # capped: capped means 0 <= S_sum < 1), -inf (capped: -0 is 0)
+    np.testing.assert_allclose(score, [-1 / 1.5, -1.0, 0.5, np.inf, -1.0, -1.0, -1.0])
+    assert capped.tolist() == [False, True, False, False, True, False, True]
+
+
+def test_a_sum_of_exactly_one_is_not_capped() -> None:
+    D = np.array([[1.0, 3.0], [0.5, 2.0]])
+    res = single_frame(D, score="inverse", shift=False, capped_match=1, dtype="float64")
+    assert res.score.tolist() == [-1.0, -1.0]  # 1/1 and min(1/0.5, 1)
+    assert res.index.tolist() == [0, 1]  # only the capped query reports frame 1
 
 
 def test_min_score_is_the_shifted_mean() -> None:
