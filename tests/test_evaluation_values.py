@@ -319,3 +319,20 @@ def test_subset_result_slices_every_field() -> None:
     assert part.config == res.config
     no_s = subset_result(match(D, MatcherConfig(ds=2)), slice(2, 6))
     assert no_s.S is None and len(no_s.index) == 4
+
+
+def test_ranks_follow_the_matchers_precision() -> None:
+    # query 0's true place (frame 0) is 1e-9 farther than the wrong frame 2: a tie in float32
+    # (the lower index, the true place, wins), not in float64 (frame 2 wins)
+    D = np.array([[0.3 + 1e-9, 5.0, 0.3], [5.0, 0.0, 5.0], [5.0, 5.0, 0.0]])
+    truth = GroundTruth(np.array([[0.0, 0], [50, 0], [100, 0]]),
+                        np.array([[0.0, 0], [50, 0], [100, 0]]), np.zeros(3), np.zeros(3),
+                        tp_radius=1.0, fp_radius=1.0)
+    for dtype, index, rank in (("float32", 0, 1), ("float64", 2, 2)):
+        cfg = EvaluationConfig(MatcherConfig(dtype=dtype))  # type: ignore[arg-type]
+        ev = evaluate_method(MatrixMethod(D), np.arange(3), np.arange(3), truth, config=cfg)
+        assert ev.matches["single_frame"].index[0] == index, dtype
+        o = ev.outcomes["single_frame"]
+        assert o.true_rank is not None and o.true_rank[0] == rank, dtype
+        m = ev.metrics["single_frame"]
+        assert m.recall_at_n[1] == m.recall_at_1, dtype

@@ -157,6 +157,8 @@ def test_loop_pairs_at_the_boundaries() -> None:
     got = loop_pairs(pos, times, 1.0, 2.0).tolist()
     assert got == [[3, 0], [4, 1]]  # (3, 1) and (4, 2) are exactly 2 s apart: not more
     assert loop_pairs(pos, times, 1.0, 2.0).dtype == np.int64
+    # unsigned stamps (frame numbers) are times like any other: no wrap-around when subtracting
+    assert loop_pairs(pos, np.arange(5, dtype=np.uint8), 1.0, 2.0).tolist() == [[3, 0], [4, 1]]
     # time running backwards: the younger frame is the query whatever the order of the frames
     assert loop_pairs(pos, times[::-1], 1.0, 2.0).tolist() == [[0, 3], [1, 4]]
     # sorted by query, then by match
