@@ -253,6 +253,7 @@ def test_describing_cost_through_the_descriptor_cache(monkeypatch: pytest.Monkey
     calls: list[int] = []
 
     def fake(method: Any, views: Any) -> tuple[np.ndarray, float, int]:
+        assert isinstance(method, Cached)
         calls.append(len(views))
         return np.asarray(views, dtype=np.float64)[:, None], 0.5, 0
 

@@ -246,6 +246,9 @@ def test_true_place_ranks_of_several_true_places_count_the_nearest() -> None:
     # with frames j < 3 only: 1 is the one nearer candidate
     assert metrics.true_place_ranks(D, [np.array([0, 2])], db_limit=np.array([3])).tolist() == [2]
     assert metrics.true_place_ranks(D, [[4]]).tolist() == [1]
+    # indices and limits read back as floats (JSON) are still indices
+    assert metrics.true_place_ranks(D, [np.array([0.0, 2.0])],
+                                    db_limit=np.array([3.0])).tolist() == [2]
     # a tie between two true places: the lower index is the one ranked
     tie = np.array([[0.2, 0.1, 0.2, 0.2]])
     assert metrics.true_place_ranks(tie, [np.array([2, 3])]).tolist() == [3]  # 1 and 0 first
