@@ -31,6 +31,16 @@ def test_velocity_grids() -> None:
         -0.2, 0.0, 0.2]
 
 
+def test_velocity_grids_are_computed_to_9_decimals() -> None:
+    # a step 1.3e-11 off 0.1 (a value read back from a file, say) is the step 0.1: the count
+    # of steps and the velocities are rounded to 9 decimals
+    assert MatcherConfig(v_step=0.1000000000133).velocities().tolist() == [0.8, 0.9, 1.0, 1.1]
+    assert MatcherConfig(v_step=0.1000000004).velocities().tolist() == [0.8, 0.9, 1.000000001]
+    # v_max within 1e-9 of a grid velocity is that velocity: excluded when not inclusive
+    assert MatcherConfig(v_max=1.1000000004, v_inclusive=False).velocities().tolist() == [
+        0.8, 0.9, 1.0]
+
+
 def test_trajectory_query_offsets() -> None:
     assert MatcherConfig(ds=5).u_range() == (-5, 0)
     assert MatcherConfig(ds=5, trajectory="centred").u_range() == (-3, 2)
@@ -82,7 +92,9 @@ def test_a_trajectory_at_velocity_two_by_hand() -> None:
     assert res.velocity.tolist() == [1.0, 2.0, 2.0]
     assert res.n_terms.tolist() == [1, 2, 3] and res.complete.tolist() == [False, False, True]
     assert res.score.tolist() == [0.0, 0.0, 0.0] and res.best_s.tolist() == [0.0, 0.0, 0.0]
-    assert res.S is not None
+    assert res.S is not None and res.S.dtype == np.float64
+    S32 = match(planted(), dataclass_replace(cfg, dtype="float32"), keep_S=True).S
+    assert S32 is not None and S32.dtype == np.float32  # in the matcher's precision
     # S(2, j): at V = 1 the trajectory (j-2, j-1, j) needs j >= 2; at V = 2, j >= 4
     np.testing.assert_allclose(res.S[2], [np.inf, np.inf, 2 / 3, 2 / 3, 0.0, 1.0])
     np.testing.assert_allclose(res.S[1], [np.inf, 0.5, 0.0, 1.0, 1.0, 1.0])

@@ -96,6 +96,10 @@ def test_precision_level_bounds() -> None:
     assert near.recall_at_precision == pytest.approx(0.2)
     half = metrics.evaluate_outcomes(o, precision_level=0.5)  # every threshold qualifies
     assert half.recall_at_precision == pytest.approx(0.4)
+    # a precision exactly at the level qualifies: 2/3 at threshold .6 (recall .4)
+    two_thirds = metrics.evaluate_outcomes(o, precision_level=2 / 3)
+    assert two_thirds.recall_at_precision == pytest.approx(0.4)
+    assert two_thirds.recall_at_precision_of_correct == 1.0
 
 
 def test_no_correct_match_gives_zeros_and_says_so() -> None:
@@ -194,6 +198,7 @@ def test_confidence_checks() -> None:
         metrics.outcomes([np.inf, 0.1], [F, F], [T, T])
     o = metrics.outcomes([NINF, 0.1], [F, F], [T, T])  # -inf is "no match", allowed
     assert o.confidence.dtype == np.float64 and o.confidence[0] == NINF
+    assert metrics.outcomes([3, 2], [F, F], [T, T]).confidence.dtype == np.float64
 
 
 def test_inconsistent_labels_are_errors_naming_the_problem() -> None:
