@@ -241,10 +241,25 @@ def test_enhance_by_hand() -> None:
     assert got is out and out[0, 0] == 0.0 and out[0, 1] == pytest.approx(0.5 / np.sqrt(0.5))
     np.testing.assert_allclose(matching.enhance(row, 1, "causal"),
                                [[0.0, 1 / np.sqrt(2), 1 / np.sqrt(2)]])
-    for args, kw in [((row, -1), {}), ((row, 1), {}), ((row, 2, "future"), {}),
-                     ((row, 2), {"dtype": "float16"})]:
-        with pytest.raises(ConfigError):
-            matching.enhance(*args, **kw)  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match=r"^enhance window must be 0 \(off\) or >= 2, got -1$"):
+        matching.enhance(row, -1)
+    with pytest.raises(ConfigError, match=r"^enhance window must be 0 \(off\) or >= 2, got 1$"):
+        matching.enhance(row, 1)
+    with pytest.raises(ConfigError, match=r"^enhance mode must be 'centred' or 'causal', got "):
+        matching.enhance(row, 2, "future")
+    with pytest.raises(ConfigError, match=r"^dtype must be 'float32' or 'float64', got 'float16'"):
+        matching.enhance(row, 2, dtype="float16")
+
+
+def test_enhance_defaults_are_the_papers() -> None:
+    D = np.random.default_rng(4).random((3, 25))
+    np.testing.assert_allclose(matching.enhance(D), ref_enhance(D, 10, "centred"), atol=1e-7)
+    np.testing.assert_allclose(matching.enhance(D, mode="causal"), ref_enhance(D, 10, "causal"),
+                               atol=1e-7)
+    # float64 unless asked, whatever the input
+    assert matching.enhance(D.astype(np.float32), 0).dtype == np.float64
+    assert matching.enhance(D.astype(np.float32)).dtype == np.float64
+    assert matching.enhance(D, 4, dtype="float32").dtype == np.float32
 
 
 # --------------------------------------------------------------------------- input checks
@@ -328,6 +343,9 @@ def test_wrappers_pass_their_settings_and_name_themselves() -> None:
                                                                                 "seqslam")
     assert q.S is not None and np.all(q.index < 6)
     assert single_frame(D).S is None and seqslam(D).S is None
+    # the recorded settings of the defaults are the documented ones
+    assert single_frame(D).config == MatcherConfig(method="single_frame", ds=0, enhance_window=0)
+    assert seqslam(D).config == MatcherConfig()
 
 
 def test_result_to_dict_by_hand() -> None:

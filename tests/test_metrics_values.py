@@ -283,5 +283,7 @@ def test_recall_at_n_by_hand() -> None:
     assert metrics.recall_at_n(ranks, has, (1, 2, 3, 9, 10)) == {
         1: 0.25, 2: 0.5, 3: 0.75, 9: 0.75, 10: 1.0}
     assert metrics.recall_at_n(ranks, np.zeros(5, bool), (1,)) == {}
+    # 0/1 flags are flags, not indices
+    assert metrics.recall_at_n(ranks, has.astype(int), (1, 10)) == {1: 0.25, 10: 1.0}
     out = metrics.recall_at_n(ranks, has, (np.int64(5),))
     assert list(out) == [5] and type(next(iter(out))) is int
