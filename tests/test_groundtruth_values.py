@@ -79,6 +79,8 @@ def test_paper_protocol_makes_every_frame_a_candidate() -> None:
     assert gt.candidate_mask().tolist() == [[True, True]] * 3
     assert gt.candidate_mask().dtype == bool
     assert gt.is_candidate(np.array([0, 1]), 1).tolist() == [True, True]
+    assert gt.is_candidate(0, np.array([0, 1])).tolist() == [True, True]
+    assert gt.is_candidate(np.array([[0], [2]]), np.array([0, 1])).shape == (2, 2)
     assert gt.db_limit().tolist() == [2, 2, 2] and gt.db_limit().dtype == np.int64
     assert gt.has_candidate.tolist() == [True, True, True]
     assert [gt.true_matches(i).tolist() for i in range(3)] == [[1], [], [0]]
