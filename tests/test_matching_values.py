@@ -25,6 +25,7 @@ def test_velocity_grids() -> None:
     assert MatcherConfig(v_max=1.0).velocities().tolist() == [0.8, 0.9, 1.0]
     # the grid stops at the last step that fits: 0.8 + 0.3 k <= 1.2
     assert MatcherConfig(v_step=0.3, v_max=1.2).velocities().tolist() == [0.8, 1.1]
+    assert MatcherConfig(v_step=0.3, v_max=1.25).velocities().tolist() == [0.8, 1.1]  # 1.5 steps
     assert MatcherConfig(v_step=0.3, v_max=1.2, v_inclusive=False).velocities().tolist() == [
         0.8, 1.1]
     assert MatcherConfig(v_min=-0.2, v_max=0.2, v_step=0.2).velocities().tolist() == [
@@ -222,6 +223,9 @@ def test_enhanced_matrix_is_what_the_search_reads() -> None:
                                                                           shift=False))
     assert raw64.dtype == np.float32
     np.testing.assert_array_equal(raw64, D)
+    one = matching.enhanced_matrix(D, MatcherConfig(enhance_window=1, enhance_mode="causal",
+                                                    shift=False))
+    np.testing.assert_allclose(one, ref_enhance(D.astype(np.float64), 1, "causal"), atol=1e-5)
     causal = matching.enhanced_matrix(D, MatcherConfig(enhance_window=3, enhance_mode="causal",
                                                        shift=False))
     np.testing.assert_allclose(causal, ref_enhance(D.astype(np.float64), 3, "causal"), atol=1e-5)
@@ -294,15 +298,36 @@ def test_db_limit_checks() -> None:
 
 
 @pytest.mark.parametrize(
-    "bad",
-    [dict(method="loop"), dict(ds=True), dict(ds=2.0), dict(method="single_frame", ds=1),
-     dict(v_min=np.inf), dict(v_step=np.nan), dict(v_step=-0.1), dict(enhance_window=-1),
-     dict(enhance_mode="forward"), dict(edge_queries="drop"), dict(ratio_window=-1),
-     dict(shift=1), dict(offset_rounding="round"), dict(capped_match=True),
-     dict(capped_match=-1), dict(capped_match=1.0), dict(preset=""), dict(preset=3)],
+    ("bad", "says"),
+    [(dict(method="loop"), "method must be 'seqslam' or 'single_frame', got 'loop'"),
+     (dict(ds=True), "ds must be an integer >= 0, got True"),
+     (dict(ds=2.0), "ds must be an integer >= 0, got 2.0"),
+     (dict(method="single_frame", ds=1), "single_frame matching has ds = 0, got ds=1"),
+     (dict(v_min=np.inf), "v_min must be finite, got inf"),
+     (dict(v_step=np.nan), "v_step must be finite, got nan"),
+     (dict(v_step=-0.1), "v_step must be > 0, got -0.1"),
+     (dict(v_min=1.2, v_max=1.0), r"v_max \(1.0\) must be >= v_min \(1.2\)"),
+     (dict(enhance_window=-1), r"enhance_window must be 0 \(off\) or >= 2, got -1"),
+     (dict(enhance_mode="forward"), "enhance_mode must be 'centred' or 'causal', got 'forward'"),
+     (dict(trajectory="future"), "trajectory must be 'causal' or 'centred', got 'future'"),
+     (dict(edge_queries="drop"), "edge_queries must be 'shorten' or 'skip', got 'drop'"),
+     (dict(out_of_range="wrap"), "out_of_range must be 'exclude' or 'clip', got 'wrap'"),
+     (dict(score="max"), "score must be one of 'min', 'ratio', 'inverse', got 'max'"),
+     (dict(ratio_window=-1), "ratio_window must be >= 0, got -1"),
+     (dict(dtype="float16"), "dtype must be 'float32' or 'float64', got 'float16'"),
+     (dict(shift=1), "shift must be true or false, got 1"),
+     (dict(offset_rounding="round"),
+      "offset_rounding must be 'half_up' or 'floor_start', got 'round'"),
+     (dict(capped_match=True), r"capped_match must be null \(keep the match\) or a frame index"),
+     (dict(capped_match=-1), r"capped_match must be null \(keep the match\) or a frame index"),
+     (dict(capped_match=1.0), r"capped_match must be null \(keep the match\) or a frame index"),
+     (dict(preset=""), "preset must be a preset's name, got ''"),
+     (dict(preset=3), "preset must be a preset's name, got 3"),
+     (dict(v_min=1.0, v_max=1.0, v_inclusive=False),
+      r"the velocity grid is empty \(v_inclusive=False and v_min == v_max\)$")],
 )
-def test_each_setting_is_checked(bad: dict) -> None:
-    with pytest.raises(ConfigError, match=r"^matcher config: "):
+def test_each_setting_is_checked(bad: dict, says: str) -> None:
+    with pytest.raises(ConfigError, match=f"^matcher config: {says}"):
         MatcherConfig(**bad)
 
 
