@@ -5,6 +5,7 @@ Each value below is worked out by hand from the module docstring's definitions."
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -103,8 +104,10 @@ def test_precision_level_bounds() -> None:
 
 
 def test_no_correct_match_gives_zeros_and_says_so() -> None:
-    m = metrics.evaluate([0.9, 0.7, 0.7, NINF], [F, F, F, F], [T, T, F, T],
-                         ambiguous=[F, T, F, F])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # F1 of precision 0 and recall 0 is 0, not 0 / 0
+        m = metrics.evaluate([0.9, 0.7, 0.7, NINF], [F, F, F, F], [T, T, F, T],
+                             ambiguous=[F, T, F, F])
     assert m.notes == ["no correct match: every recall, F1 and extended precision is 0",
                        "ROC AUC undefined: every match it reads is wrong"]
     # decided: .9 and .7 (the other .7 is ambiguous): two thresholds, precision 0 at both
