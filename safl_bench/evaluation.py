@@ -26,12 +26,17 @@ from safl_bench.errors import ConfigError, DataError
 from safl_bench.groundtruth import EXCLUDED, TP, GroundTruth
 from safl_bench.matching import MatcherConfig, MatchResult, match
 from safl_bench.method import Method
-from safl_bench.metrics import Metrics, evaluate, retrieval_recall
+from safl_bench.metrics import (
+    RECALL_AT,
+    Metrics,
+    Outcomes,
+    evaluate_outcomes,
+    outcomes,
+    true_place_ranks,
+)
 
 #: The matching modes every evaluation reports, in the order tables show them.
 MODES = ("sequence", "single_frame")
-#: The N of the Recall@N that single-frame results report.
-RECALL_AT = (1, 5, 10)
 
 
 #: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
@@ -111,27 +116,35 @@ def same_settings(recorded: Any, wanted: dict[str, Any]) -> bool:
 
 @dataclass
 class Evaluation:
-    """What one evaluation produced: matches and metrics per mode, and how long each stage took."""
+    """What one evaluation produced: matches, per-query outcomes and measures per mode, and how
+    long each stage took."""
 
     matches: dict[str, MatchResult]
+    outcomes: dict[str, Outcomes]
     metrics: dict[str, Metrics]
     describe_s: float  # both sides, all frames, in the method's own batching
     n_described: int
     matcher_s: float  # the sequence matcher on the difference matrix
 
 
-def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:
-    """Metrics of one matcher's answers against the task's ground truth.
-
-    A query answered with a frame in the excluded band (revisit protocol) is left out; a query
-    the matcher could not answer (index -1) counts as not claimed.
-    """
+def match_outcomes(truth: GroundTruth, result: MatchResult,
+                   ranks: np.ndarray | None = None) -> Outcomes:
+    """The label layer: each query's reported match labelled against the task's ground truth
+    (`safl_bench.metrics` defines what each label counts as). A match in the band between the
+    true- and false-positive radii is ambiguous; a match to a frame the query may not match is
+    wrong; a query the matcher could not answer (index -1) reported no match."""
     claimed = result.index >= 0
     labels = np.zeros(len(result.index), dtype=np.int8)
     answered = np.flatnonzero(claimed)
     labels[answered] = truth.label_of(answered, result.index[answered])
-    valid = ~(claimed & (labels == EXCLUDED))
-    return evaluate(result.confidence, labels == TP, truth.has_loop, valid=valid)
+    return outcomes(result.confidence, claimed & (labels == TP), truth.has_loop,
+                    ambiguous=claimed & (labels == EXCLUDED), has_candidate=truth.has_candidate,
+                    true_rank=ranks)
+
+
+def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:
+    """The measures of one matcher's answers against the task's ground truth."""
+    return evaluate_outcomes(match_outcomes(truth, result))
 
 
 def describe(method: Method, views: Any) -> tuple[np.ndarray, float]:
@@ -189,11 +202,14 @@ def evaluate_method(
         seconds[mode] = time.perf_counter() - t0
     scored = scored_queries(len(D), cfg.trim_queries)
     part = subset_truth(truth, scored, slice(None)) if cfg.trim_queries else truth
-    metrics = {mode: score_matches(part, subset_result(matches[mode], scored)) for mode in MODES}
-    metrics["single_frame"].recall_at_n = retrieval_recall(
-        D[scored], part.has_loop, lambda q, j: part.label_of(q, j) == TP, RECALL_AT,
-        db_limit=None if limit is None else limit[scored])
-    return Evaluation(matches, metrics, describe_s, n, seconds["sequence"])
+    ranks = true_place_ranks(D[scored], [part.true_matches(i) for i in range(part.n_queries)],
+                             db_limit=None if limit is None else limit[scored],
+                             dtype=cfg.single_frame.dtype)
+    per_query = {mode: match_outcomes(part, subset_result(matches[mode], scored),
+                                      ranks if mode == "single_frame" else None)
+                 for mode in MODES}
+    metrics = {mode: evaluate_outcomes(per_query[mode], recall_at=RECALL_AT) for mode in MODES}
+    return Evaluation(matches, per_query, metrics, describe_s, n, seconds["sequence"])
 
 
 def scored_queries(n_queries: int, trim: int) -> slice:

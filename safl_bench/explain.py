@@ -31,19 +31,21 @@ from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation import (
     EvaluationConfig,
     difference_matrix,
+    match_outcomes,
     score_matches,
     scored_queries,
     subset_result,
     subset_truth,
 )
-from safl_bench.groundtruth import EXCLUDED, FP, TP
 from safl_bench.matching import MatchResult, enhanced_matrix, match
 from safl_bench.method import Method, method_input
-from safl_bench.metrics import Metrics
+from safl_bench.metrics import AMBIGUOUS, Metrics
+from safl_bench.metrics import CORRECT as CORRECT_LABEL
+from safl_bench.metrics import WRONG as WRONG_LABEL
 from safl_bench.records import ResultRecord, default_results_dir, load_record, record_path
 
 #: Per-query outcome codes of `Explanation.status`.
-CORRECT, WRONG, BAND, NO_MATCH, NOT_SCORED = "correct", "wrong", "excluded band", "no match", "not scored"
+CORRECT, WRONG, BAND, NO_MATCH, NOT_SCORED = "correct", "wrong", "ambiguous band", "no match", "not scored"
 
 _SCORE_WORDS = {
     "min": "-S, the negated lowest mean difference",
@@ -164,19 +166,18 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     nq = len(D)
     scored = scored_queries(nq, config.trim_queries)
     part = subset_truth(truth, scored, slice(None)) if config.trim_queries else truth
+    outcomes = match_outcomes(truth, result)  # every query; the metrics see the scored ones
     metrics = score_matches(part, subset_result(result, scored))
 
     claimed = result.index >= 0
-    label = np.zeros(nq, dtype=np.int8)
     answered = np.flatnonzero(claimed)
-    label[answered] = truth.label_of(answered, result.index[answered])
     status = np.full(nq, NOT_SCORED, dtype=object)
     inside = np.zeros(nq, dtype=bool)
     inside[scored] = True
     status[inside & ~claimed] = NO_MATCH
-    status[inside & claimed & (label == TP)] = CORRECT
-    status[inside & claimed & (label == FP)] = WRONG
-    status[inside & claimed & (label == EXCLUDED)] = BAND
+    status[inside & claimed & (outcomes.label == CORRECT_LABEL)] = CORRECT
+    status[inside & claimed & (outcomes.label == WRONG_LABEL)] = WRONG
+    status[inside & claimed & (outcomes.label == AMBIGUOUS)] = BAND
     distance = np.full(nq, np.inf)
     distance[answered] = truth.distances(answered, result.index[answered])
     true_index = np.full(nq, -1, dtype=np.int64)

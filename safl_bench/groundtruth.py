@@ -199,6 +199,16 @@ class GroundTruth:
         return self._true[query]
 
     @property
+    def has_candidate(self) -> np.ndarray:
+        """(Nq,) bool: queries that may match at least one database frame (the revisit
+        protocol's queries younger than the time window have none)."""
+        if self.n_database == 0:
+            return np.zeros(self.n_queries, dtype=bool)
+        if self.window_s is None:
+            return np.ones(self.n_queries, dtype=bool)
+        return self.query_times - self.database_times.min() > self.window_s
+
+    @property
     def has_loop(self) -> np.ndarray:
         """(Nq,) bool: queries with at least one true match among their candidates."""
         return np.array([len(t) > 0 for t in self._true], dtype=bool)

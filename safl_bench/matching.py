@@ -40,7 +40,8 @@ are the paper's; `safl_bench.matcher_presets` names whole sets of these settings
    ``S(T, j, V)`` is the MEAN of ``Dhat`` over the trajectory's points: for a full trajectory
    this is the paper's sum divided by the constant ``ds + 1`` (same ranking), and it keeps
    shortened trajectories (below) on the same scale. ``S(T, j) = min_V S(T, j, V)``, and the
-   match of ``T`` is ``argmin_j S(T, j)`` (ties: lowest velocity, then lowest ``j``).
+   match of ``T`` is ``argmin_j S(T, j)`` (ties: lowest velocity, then lowest ``j``: the
+   one tie rule of `safl_bench.metrics`, which its Recall@N ranks follow in the same dtype).
 3. Velocities: ``V_min, V_min + V_step, ..., V_max`` computed as ``round(V_min + k V_step, 9)``
    (no accumulated steps). The paper's Table I lists V from 0.8 to 1.1 by 0.1, four velocities,
    so ``V_max`` is included (``v_inclusive=True``, default). The authors' public code

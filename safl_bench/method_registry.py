@@ -171,10 +171,16 @@ def list_methods(*, include_broken: bool = False) -> list[MethodInfo]:
 
 
 def method_class(name: str) -> type[Method]:
-    """The class registered as `name`; RegistryError (with suggestions) when there is none."""
+    """The class registered as `name` (or ``name@version``, which must be the registered
+    version: records name methods that way); RegistryError (with suggestions) when there is
+    none."""
     discover()
+    name, _, version = name.partition("@")
     info = _registry.get(name)
     if info is not None and info.cls is not None:
+        if version and version != str(info.cls.version):
+            raise RegistryError(f"method {name!r} is version {info.cls.version} here, not "
+                                f"{version!r}; run `{name}` (its only registered version)")
         return info.cls
     if name in _broken:
         raise RegistryError(f"method {name!r} failed to load from {_broken[name].origin}: {_broken[name].error}")

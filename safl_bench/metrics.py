@@ -1,50 +1,104 @@
-"""Loop-closure metrics on scikit-learn: PR curve, ROC AUC, recall at 100 % precision, F1 max,
-extended precision.
+"""Loop-closure metrics: every measure defined once, by name (metrics version 2).
 
-Orientation: the matcher's score is LOWER = better; every metric here takes a CONFIDENCE, HIGHER =
-more confident. `confidence_from_score` is the one place the sign is flipped (a score of +inf,
+Orientation: the matcher's score is LOWER = better; every measure here reads a CONFIDENCE, HIGHER
+= more confident. `confidence_from_score` is the one place the sign is flipped (a score of +inf,
 "no match", becomes -inf, "never accepted").
 
-Each query contributes one reported match. At a threshold tau the accepted matches are those with
-confidence >= tau; an accepted correct match is a TP, an accepted wrong one a FP, and
+What the measures read (`Outcomes`, one entry per scored query; the label layer that fills it
+is `safl_bench.evaluation.score_matches` on `safl_bench.groundtruth.GroundTruth`):
 
-    precision = TP / (TP + FP)        recall = TP / (number of queries that have a true place)
+* ``has_candidate``: the query may match at least one database frame (revisit protocol: some
+  frame is older than the time window; paper and BEVPlace protocols: always). A query without a
+  candidate cannot be answered and is left out of EVERY measure (LoGG3D-Net skips such queries
+  the same way, ``evaluation/eval_sequence.py`` line 117).
+* ``has_true_place``: some candidate lies within the true-positive radius. Fixed by the ground
+  truth alone: the POSITIVES, ``P`` = their number, are the same for every method on a task.
+* ``confidence``: of the query's one reported match; -inf = the matcher reported none.
+* ``label`` of the reported match: correct (+1: a candidate within the true-positive radius),
+  wrong (-1: beyond the false-positive radius, or not a candidate), or ambiguous (0: the revisit
+  protocol's 3-20 m band). ``C`` = the number of correct reported matches.
+* ``true_rank`` (single-frame mode): the rank of the nearest true place among the query's
+  candidates by descriptor distance (1 = nearest; 0 = no true place). See "Ties" below.
 
-so a query whose match is wrong (or that claims no match) but has a true place lowers recall at
-every threshold. The caller states, per query, whether the reported match is correct, whether the
-query has any true place, and whether it takes part at all (`valid`), e.g. with the label helpers:
+Thresholds. At a threshold tau the ACCEPTED matches are those with confidence >= tau (tied
+confidences are accepted together: one threshold per distinct confidence, scikit-learn's
+``precision_recall_curve``). TP(tau) = accepted correct, FP(tau) = accepted wrong; an accepted
+ambiguous match is neither, as in LoGG3D-Net's KITTI revisit evaluation (``eval_sequence.py``
+lines 169-174 at commit ``cfbe064``: within ``revisit_criteria`` a TP, beyond
+``not_revisit_criteria`` a FP, nothing in between). Precision(tau) = TP / (TP + FP).
 
-* `paper_labels` (paper protocol, §IV.A): correct = matched database frame within D_thresh = 10 m
-  of the query's ground-truth position; has a true place = some database frame within D_thresh.
-* `revisit_labels` (revisit protocol): correct = within 3 m; wrong = beyond 20 m; a match in the
-  3-20 m band is left out of the evaluation entirely (valid = False; it counts neither as TP, FP nor
-  in the recall denominator); queries with no eligible database frame within 3 m are the negatives.
+Two recall conventions exist in the field, and both are computed, named apart:
 
-ROC: the binary classification "is the reported match correct" by confidence over the valid
-queries (queries that claim no match rank below all others), TPR = TP / correct,
-FPR = FP / wrong, area by `roc_auc_score`.
-Recall at 100 % precision is exact (no false positive accepted); the authors' code used >= 99 %,
-available as `precision_level=0.99`. Extended precision (Yin et al.) is
-EP = (P_R0 + R_P100) / 2 with P_R0 the precision at the lowest recall (the most confident
-threshold) and R_P100 the exact recall at 100 % precision.
+* recall OVER POSITIVES, ``R(tau) = TP(tau) / P``: the measures without a suffix. A query with a
+  true place whose match is wrong, ambiguous, or rejected, or that reported none, lowers it, so
+  a method cannot raise it by answering less.
+* recall OVER CORRECT MATCHES, ``Rc(tau) = TP(tau) / C``: the measures ending in ``_of_correct``.
+  This is the paper's Eq. 13 (TP / (TP + FN), FN = correct matches "erroneously discarded by the
+  match score") as its authors' scoring computes it (``precision_recall_curve(is_correct,
+  score)`` in ``src/plot/SLFL/plotDraw_slfl.py`` lines 111-128 at commit ``25be0fd``) and as
+  VPR-Bench does (``performance_comparison.py`` line 23 at commit ``77ad30f``). It is 1 at the
+  lowest threshold whatever the share of wrong matches. ``Rc = R * P / C``.
 
-Degenerate cases: empty input, NaN or +inf confidences, mismatched lengths, or no query with a
-true place (recall undefined) raise DataError. No correct match at all gives recall 0, F1 0,
-R_P100 0, P_R0 0 and `roc_auc = None` (one class only; said in `notes`); all-equal confidences
-give a one-threshold curve.
+LoGG3D-Net's recall (``eval_sequence.py`` lines 176-180, 197) is neither: its TP + FN drops the
+positive queries whose accepted match was wrong or ambiguous at that threshold, so it moves with
+the method's wrong answers; ours keeps P fixed (their precision equals ours at every threshold).
+
+The measures (each a fraction in [0, 1]; in a record's ``metrics``):
+
+| name | definition | denominator |
+|---|---|---|
+| ``recall_at_100_precision`` | max R(tau) over the thresholds with FP(tau) = 0 (0 when the most confident match is wrong) | P |
+| ``recall_at_100_precision_of_correct`` | the same in Rc | C |
+| ``recall_at_precision[_of_correct]`` (`evaluate` only) | max R (Rc) over the thresholds with precision >= ``precision_level`` (the authors' 0.99) | P (C) |
+| ``f1_max`` | max over tau of 2 Pr R / (Pr + R) | P |
+| ``f1_max_of_correct`` | the same with Rc | C |
+| ``extended_precision`` | (P_R0 + R_P100) / 2 (Ferrarini et al.): P_R0 = precision at the most confident threshold, R_P100 = ``recall_at_100_precision`` | P |
+| ``extended_precision_of_correct`` | the same with Rc: VPR-Bench's ``compute_extendedprecision`` (lines 105-113) | C |
+| ``auc`` | ROC AUC of "is the reported match correct" by confidence (``roc_auc_score``): positives = correct matches, negatives = wrong matches and queries that reported none (ranked below all others); the paper's Eq. 14; None with one class only | queries with a candidate, less ambiguous matches |
+| ``recall_at_1`` | correct reported matches / P (= R at the lowest threshold: accept everything) | P |
+| ``recall_at_n`` {"N"} | queries with ``1 <= true_rank <= N`` / P (single-frame mode only) | P |
+
+Ties (one rule everywhere). Equal distances are ordered by the LOWER database index, in the
+matcher's precision (``MatcherConfig.dtype``, float32 by default): the matcher keeps the first
+minimum (`safl_bench.matching`), and `true_place_ranks` counts a candidate as nearer than the
+true place when its distance is lower, or equal with a lower index, after converting the matrix
+to the same dtype. So ``recall_at_n["1"]`` equals the single-frame ``recall_at_1`` by
+construction. Tied confidences across queries are one threshold (above).
+
+Degenerate cases. Empty input, NaN or +inf confidences, mismatched lengths, a correct match on a
+query without a true place, or no positive at all (`NoPositivesError`: recall is undefined; the
+runner names the task) raise DataError. No correct match gives 0 for every recall, F1 and
+extended precision (said in ``notes``); one class only gives ``auc = None``.
+
+``METRICS_VERSION`` is stored in every record: version 1 (records without it) divided recall by
+the queries with a true place whose match was not ambiguous (so P depended on the method) and
+counted queries without a candidate in the AUC; it had no ``_of_correct`` measures.
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 from sklearn.metrics import precision_recall_curve, roc_auc_score, roc_curve
 
 from .errors import ConfigError, DataError
+
+#: The version of these definitions; records store it (`safl_bench.records`).
+METRICS_VERSION = 2
+
+#: The N of the Recall@N that single-frame results report.
+RECALL_AT = (1, 5, 10)
+
+#: Labels of a reported match in `Outcomes.label`.
+CORRECT, AMBIGUOUS, WRONG = 1, 0, -1
+
+
+class NoPositivesError(DataError):
+    """No query has a true place: every recall is undefined."""
 
 
 def confidence_from_score(score: np.ndarray) -> np.ndarray:
@@ -56,43 +110,51 @@ def _clean(values: np.ndarray) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in np.asarray(values, dtype=np.float64)]
 
 
-@dataclass
-class Labels:
-    """Per-query ground truth for `evaluate` (see the module docstring)."""
+@dataclass(frozen=True)
+class Outcomes:
+    """Per query, everything the measures read (module docstring); arrays of one length.
 
-    is_correct: np.ndarray  # bool (N,)
-    has_true_place: np.ndarray  # bool (N,)
-    valid: np.ndarray  # bool (N,)
-    match_distance: np.ndarray  # float (N,), metres, +inf where no match
+    Records store these, so a record's measures can be recomputed without the data."""
+
+    confidence: np.ndarray  # float64, -inf = no match reported
+    label: np.ndarray  # int8, CORRECT / AMBIGUOUS / WRONG (read only where a match was reported)
+    has_true_place: np.ndarray  # bool
+    has_candidate: np.ndarray  # bool
+    true_rank: np.ndarray | None = None  # int64, 1-based rank of the nearest true place; 0 = none
 
 
 @dataclass
 class Metrics:
-    """Curves and scalar metrics of one evaluation; `to_dict` gives JSON."""
+    """Curves and measures of one evaluation (module docstring); `to_dict` gives JSON."""
 
-    n_queries: int
-    n_valid: int
-    n_positive: int  # valid queries with a true place (recall denominator)
-    n_correct: int  # valid queries whose reported match is correct
-    n_claimed: int  # valid queries with a finite confidence
+    n_queries: int  # all queries given
+    n_scored: int  # queries with a candidate: the ones every measure reads
+    n_positive: int  # P: queries with a true place
+    n_correct: int  # C: correct reported matches
+    n_ambiguous: int  # reported matches in the ambiguous band
+    n_claimed: int  # scored queries that reported a match
     precision: np.ndarray  # PR curve, thresholds increasing; last point (1, 0) has no threshold
-    recall: np.ndarray
+    recall: np.ndarray  # over positives
+    recall_of_correct: np.ndarray  # over correct matches
     thresholds: np.ndarray
     fpr: np.ndarray
     tpr: np.ndarray
     roc_thresholds: np.ndarray
     roc_auc: float | None
-    recall_at_100: float  # exact: no false positive
+    recall_at_100: float
+    recall_at_100_of_correct: float
     precision_level: float
-    recall_at_precision: float  # at precision >= precision_level
+    recall_at_precision: float
+    recall_at_precision_of_correct: float
     precision_at_min_recall: float  # P_R0
     extended_precision: float
+    extended_precision_of_correct: float
     f1_max: float
-    notes: list[str] = field(default_factory=list)
-    #: fraction of queries with a true place whose reported match is one (None: no such query)
-    recall_at_1: float | None = None
-    #: {N: fraction with a true place among the N nearest database frames} (`retrieval_recall`)
+    f1_max_of_correct: float
+    recall_at_1: float
+    #: {N: share of positives with a true place among the N nearest candidates} (`recall_at_n`)
     recall_at_n: dict[int, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -112,188 +174,218 @@ def _bool_array(x: Any, name: str, n: int) -> np.ndarray:
     return arr
 
 
-def evaluate(
-    confidence: np.ndarray,
-    is_correct: np.ndarray,
-    has_true_place: np.ndarray,
-    *,
-    valid: np.ndarray | None = None,
-    precision_level: float = 1.0,
-) -> Metrics:
-    """All metrics for one run. Arrays are per query; `confidence` higher = more confident,
-    -inf = no match claimed. See the module docstring for the definitions."""
+def _confidence(confidence: Any) -> np.ndarray:
     conf = np.asarray(confidence, dtype=np.float64) if np.ndim(confidence) else np.array([])
     if conf.ndim != 1:
         raise DataError(f"confidence must be 1-D (one value per query), got shape {conf.shape}")
-    n = conf.shape[0]
-    if n == 0:
+    if conf.shape[0] == 0:
         raise DataError("nothing to evaluate: no queries")
     if np.isnan(conf).any():
         raise DataError(f"confidence has {int(np.isnan(conf).sum())} NaN values")
     if np.isposinf(conf).any():
         raise DataError("confidence has +inf values (a score of -inf?)")
-    if not 0.0 < precision_level <= 1.0:
-        raise ConfigError(f"precision_level must be in (0, 1], got {precision_level}")
+    return conf
+
+
+def outcomes(
+    confidence: Any,
+    is_correct: Any,
+    has_true_place: Any,
+    *,
+    ambiguous: Any = None,
+    has_candidate: Any = None,
+    true_rank: Any = None,
+) -> Outcomes:
+    """Validated `Outcomes` from per-query arrays: `is_correct` (the reported match is a true
+    place), `ambiguous` (it lies in the band: neither correct nor wrong; None = none does),
+    `has_candidate` (None = every query has one), `true_rank` (optional)."""
+    conf = _confidence(confidence)
+    n = conf.shape[0]
     correct = _bool_array(is_correct, "is_correct", n)
     has_true = _bool_array(has_true_place, "has_true_place", n)
-    ok = np.ones(n, bool) if valid is None else _bool_array(valid, "valid", n)
+    band = np.zeros(n, bool) if ambiguous is None else _bool_array(ambiguous, "ambiguous", n)
+    cand = np.ones(n, bool) if has_candidate is None else _bool_array(has_candidate, "has_candidate", n)
+    if (correct & band).any():
+        raise DataError("a reported match is marked both correct and ambiguous")
     if (correct & ~has_true).any():
         raise DataError("a query is marked correct but has no true place")
-    notes: list[str] = []
+    if (has_true & ~cand).any():
+        raise DataError("a query has a true place but no candidate")
+    label = np.where(correct, CORRECT, np.where(band, AMBIGUOUS, WRONG)).astype(np.int8)
+    rank = None
+    if true_rank is not None:
+        rank = np.asarray(true_rank)
+        if rank.shape != (n,) or not np.issubdtype(rank.dtype, np.integer) or (rank < 0).any():
+            raise DataError(f"true_rank must be integers >= 0 of shape ({n},), got "
+                            f"{rank.dtype} {rank.shape}")
+        if ((rank > 0) != has_true).any():
+            raise DataError("true_rank must be >= 1 exactly where a query has a true place")
+        rank = rank.astype(np.int64)
+    return Outcomes(confidence=conf, label=label, has_true_place=has_true, has_candidate=cand,
+                    true_rank=rank)
 
-    correct_all, has_true_all = correct & np.isfinite(conf), has_true
-    conf, correct, has_true = conf[ok], correct[ok], has_true[ok]
-    n_valid = int(ok.sum())
-    n_pos = int(has_true.sum())
-    if n_pos == 0:
-        raise DataError(f"no (valid) query has a true place among {n} queries: recall is undefined")
-    claimed = np.isfinite(conf)
-    y, s = correct[claimed], conf[claimed]
-    n_correct = int(y.sum())
 
-    if n_correct == 0:
-        notes.append("no correct match: recall, F1 and R_P100 are 0")
-        thr = np.unique(s)
-        precision = np.append(np.zeros(thr.size), 1.0)
-        recall = np.zeros(thr.size + 1)
-    else:
-        precision, recall_sk, thr = precision_recall_curve(y, s)
-        recall = recall_sk * (n_correct / n_pos)
+def evaluate(
+    confidence: Any,
+    is_correct: Any,
+    has_true_place: Any,
+    *,
+    ambiguous: Any = None,
+    has_candidate: Any = None,
+    precision_level: float = 1.0,
+) -> Metrics:
+    """Every measure of one run from per-query arrays (`outcomes` says what each means);
+    `confidence` higher = more confident, -inf = no match reported."""
+    return evaluate_outcomes(
+        outcomes(confidence, is_correct, has_true_place, ambiguous=ambiguous,
+                 has_candidate=has_candidate),
+        precision_level=precision_level)
 
-    # points with a threshold (drop sklearn's appended (1, 0) end point)
-    p, r = precision[:-1], recall[:-1]
-    exact = p == 1.0  # tp / (tp + fp) is exactly 1.0 iff fp == 0
-    recall_at_100 = float(r[exact].max()) if exact.any() else 0.0
-    at_level = p >= precision_level if precision_level < 1.0 else exact
-    recall_at_level = float(r[at_level].max()) if at_level.any() else 0.0
+
+def _best_recall(recall: np.ndarray, keep: np.ndarray) -> float:
+    return float(recall[keep].max()) if keep.any() else 0.0
+
+
+def _f1(p: np.ndarray, r: np.ndarray) -> float:
     with np.errstate(invalid="ignore", divide="ignore"):
         f1 = np.where(p + r > 0, 2 * p * r / (p + r), 0.0)
-    f1_max = float(f1.max()) if f1.size else 0.0
+    return float(f1.max()) if f1.size else 0.0
+
+
+def evaluate_outcomes(
+    o: Outcomes,
+    *,
+    precision_level: float = 1.0,
+    recall_at: Sequence[int] = (),
+) -> Metrics:
+    """Every measure from `Outcomes` (module docstring); Recall@N for each N of `recall_at`
+    when the outcomes carry ranks."""
+    if not 0.0 < precision_level <= 1.0:
+        raise ConfigError(f"precision_level must be in (0, 1], got {precision_level}")
+    n = len(o.confidence)
+    notes: list[str] = []
+    scored = o.has_candidate
+    conf, label, has_true = o.confidence[scored], o.label[scored], o.has_true_place[scored]
+    n_pos = int(has_true.sum())
+    if n_pos == 0:
+        raise NoPositivesError(f"no query has a true place among {n} queries "
+                               f"({int(scored.sum())} with a candidate): recall is undefined")
+    claimed = np.isfinite(conf)
+    correct = claimed & (label == CORRECT)
+    ambiguous = claimed & (label == AMBIGUOUS)
+    decided = claimed & ~ambiguous  # accepted, these are TP or FP
+    y, s = correct[decided], conf[decided]
+    n_correct = int(correct.sum())
+
+    if n_correct == 0:
+        notes.append("no correct match: every recall, F1 and extended precision is 0")
+        thr = np.unique(s)
+        precision = np.append(np.zeros(thr.size), 1.0)
+        recall_c = np.zeros(thr.size + 1)
+    else:
+        precision, recall_c, thr = precision_recall_curve(y, s)
+    recall = recall_c * (n_correct / n_pos)
+
+    # the points that have a threshold (sklearn appends (1, 0) without one)
+    p, r, rc = precision[:-1], recall[:-1], recall_c[:-1]
+    exact = p == 1.0  # TP / (TP + FP) is exactly 1.0 iff FP == 0
+    at_level = p >= precision_level if precision_level < 1.0 else exact
     p_r0 = float(p[-1]) if p.size else 0.0
     if s.size == 0:
-        notes.append("no query claimed a match")
+        notes.append("no query reported a match outside the ambiguous band")
 
-    # ROC over all valid queries; unclaimed ones rank below every claimed one
-    roc_conf = conf.copy()
-    if (~claimed).any():
-        roc_conf[~claimed] = (s.min() - 1.0) if s.size else 0.0
-    if correct.all() or not correct.any():
-        notes.append("ROC AUC undefined: all valid matches are " +
-                     ("correct" if correct.all() else "wrong"))
+    # ROC over the scored queries less the ambiguous matches; no match ranks below every match
+    roc_keep = ~ambiguous
+    roc_y = correct[roc_keep]
+    roc_conf = conf[roc_keep].copy()
+    unclaimed = ~np.isfinite(roc_conf)
+    if unclaimed.any():
+        roc_conf[unclaimed] = (roc_conf[~unclaimed].min() - 1.0) if (~unclaimed).any() else 0.0
+    if roc_y.all() or not roc_y.any():
+        notes.append("ROC AUC undefined: every match it reads is " +
+                     ("correct" if roc_y.all() else "wrong"))
         roc_auc = None
         fpr = tpr = roc_thr = np.array([])
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            fpr, tpr, roc_thr = roc_curve(correct, roc_conf)
-            roc_auc = float(roc_auc_score(correct, roc_conf))
+            fpr, tpr, roc_thr = roc_curve(roc_y, roc_conf)
+            roc_auc = float(roc_auc_score(roc_y, roc_conf))
 
-    # Recall@1: every query with a true place, valid or not (a match in the excluded band is no
-    # true place), as the retrieval literature counts it
-    n_true = int(has_true_all.sum())
-    recall_at_1 = float((correct_all & has_true_all).sum() / n_true) if n_true else None
+    r100, rc100 = _best_recall(r, exact), _best_recall(rc, exact)
+    ranks = None if o.true_rank is None else o.true_rank[scored]
     return Metrics(
-        recall_at_1=recall_at_1,
-        n_queries=n, n_valid=n_valid, n_positive=n_pos, n_correct=int(correct.sum()),
-        n_claimed=int(claimed.sum()), precision=precision, recall=recall, thresholds=thr,
+        n_queries=n, n_scored=int(scored.sum()), n_positive=n_pos, n_correct=n_correct,
+        n_ambiguous=int(ambiguous.sum()), n_claimed=int(claimed.sum()),
+        precision=precision, recall=recall, recall_of_correct=recall_c, thresholds=thr,
         fpr=fpr, tpr=tpr, roc_thresholds=roc_thr, roc_auc=roc_auc,
-        recall_at_100=recall_at_100, precision_level=float(precision_level),
-        recall_at_precision=recall_at_level, precision_at_min_recall=p_r0,
-        extended_precision=(p_r0 + recall_at_100) / 2, f1_max=f1_max, notes=notes)
+        recall_at_100=r100, recall_at_100_of_correct=rc100,
+        precision_level=float(precision_level),
+        recall_at_precision=_best_recall(r, at_level),
+        recall_at_precision_of_correct=_best_recall(rc, at_level),
+        precision_at_min_recall=p_r0,
+        extended_precision=(p_r0 + r100) / 2, extended_precision_of_correct=(p_r0 + rc100) / 2,
+        f1_max=_f1(p, r), f1_max_of_correct=_f1(p, rc),
+        recall_at_1=n_correct / n_pos,
+        recall_at_n=({} if ranks is None or not recall_at else
+                     recall_at_n(ranks, has_true, recall_at)),
+        notes=notes)
 
 
-def retrieval_recall(D: np.ndarray, has_true_place: np.ndarray, is_true: Any,
-                     ns: tuple[int, ...] = (1, 5, 10), db_limit: np.ndarray | None = None) -> dict[int, float]:
-    """Recall@N, the field's retrieval metric: the fraction of queries with a true place that
-    have one among the N database frames nearest in descriptor distance (`D`, (Nq, Ndb), lower =
-    nearer), each query ranking only the frames it may match (j < db_limit[i]).
-    `is_true(queries, matches)` says elementwise whether a database frame is a true place.
-    Empty when no query has a true place."""
-    D = np.asarray(D, dtype=np.float64)
-    ndb = D.shape[1]
-    queries = np.flatnonzero(np.asarray(has_true_place, dtype=bool))
-    if not len(queries) or not ndb:
-        return {}
-    if db_limit is not None:
-        D = np.where(np.arange(ndb)[None, :] < np.asarray(db_limit)[:, None], D, np.inf)
-    k = min(max(ns), ndb)
-    sub = D[queries]
-    top = np.argpartition(sub, k - 1, axis=1)[:, :k] if k < ndb else np.tile(np.arange(ndb), (len(queries), 1))
-    order = np.take_along_axis(sub, top, axis=1).argsort(axis=1, kind="stable")
-    top = np.take_along_axis(top, order, axis=1)
-    ranked = np.take_along_axis(sub, top, axis=1)
-    hit = np.asarray(is_true(np.repeat(queries, k).reshape(-1, k), top), dtype=bool) & np.isfinite(ranked)
-    first = np.where(hit.any(axis=1), hit.argmax(axis=1), k)
-    return {n: float((first < n).mean()) for n in ns}
+# --------------------------------------------------------------------------- retrieval ranks
 
 
-# --------------------------------------------------------------------------- labels
-
-
-def _xy(a: Any, name: str) -> np.ndarray:
-    arr = np.asarray(a, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0:
-        raise DataError(f"{name} must be an (N, 2) array of ground-plane positions, got {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise DataError(f"{name} has NaN or infinite positions")
-    return arr
-
-
-def _match_distance(q: np.ndarray, db: np.ndarray, index: Any) -> np.ndarray:
-    idx = np.asarray(index)
-    if idx.shape != (q.shape[0],) or not np.issubdtype(idx.dtype, np.integer):
-        raise DataError(f"index must be an integer array of shape ({q.shape[0]},), got "
-                        f"{idx.dtype} {idx.shape}")
-    if (idx >= db.shape[0]).any() or (idx < -1).any():
-        raise DataError(f"index values must be -1 (no match) or in [0, {db.shape[0]})")
-    dist = np.full(q.shape[0], np.inf)
-    found = idx >= 0
-    dist[found] = np.linalg.norm(q[found] - db[idx[found]], axis=1)
-    return dist
-
-
-def paper_labels(query_xy: Any, db_xy: Any, index: Any, *, d_thresh: float = 10.0) -> Labels:
-    """Paper protocol: correct within `d_thresh` metres; every query with a database frame
-    within `d_thresh` has a true place; all queries valid."""
-    if d_thresh <= 0:
-        raise ConfigError(f"d_thresh must be > 0, got {d_thresh}")
-    q, db = _xy(query_xy, "query_xy"), _xy(db_xy, "db_xy")
-    dist = _match_distance(q, db, index)
-    nearest, _ = cKDTree(db).query(q)
-    return Labels(is_correct=dist <= d_thresh, has_true_place=nearest <= d_thresh,
-                  valid=np.ones(q.shape[0], bool), match_distance=dist)
-
-
-def revisit_labels(
-    query_xy: Any,
-    db_xy: Any,
-    index: Any,
+def true_place_ranks(
+    D: np.ndarray,
+    true_places: Sequence[np.ndarray],
     *,
-    db_limit: Any = None,
-    tp_dist: float = 3.0,
-    fp_dist: float = 20.0,
-) -> Labels:
-    """Revisit protocol: correct within `tp_dist`, wrong beyond `fp_dist`, in between left out.
+    db_limit: np.ndarray | None = None,
+    dtype: str = "float32",
+) -> np.ndarray:
+    """(Nq,) int64: per query, the 1-based rank of its nearest true place among its candidates
+    (database frames ``j < db_limit[i]``, all when None) by the distances `D` (Nq, Ndb; lower =
+    nearer), 0 for a query without a true place. `true_places[i]`: the database indices that
+    are a true place of query i (all of them candidates).
 
-    A query has a true place if an ELIGIBLE database frame (``j < db_limit[i]``, all when None)
-    lies within `tp_dist`.
-    """
-    if not 0 < tp_dist <= fp_dist:
-        raise ConfigError(f"need 0 < tp_dist <= fp_dist, got {tp_dist}, {fp_dist}")
-    q, db = _xy(query_xy, "query_xy"), _xy(db_xy, "db_xy")
-    dist = _match_distance(q, db, index)
-    limit = np.full(q.shape[0], db.shape[0]) if db_limit is None else np.asarray(db_limit)
-    if limit.shape != (q.shape[0],):
-        raise DataError(f"db_limit must have shape ({q.shape[0]},), got {limit.shape}")
-    near = cKDTree(db).query_ball_point(q, r=tp_dist)
-    has_true = np.array([bool(js) and min(js) < lim for js, lim in zip(near, limit, strict=True)])
-    correct = dist <= tp_dist
-    valid = correct | (dist > fp_dist)
-    return Labels(is_correct=correct, has_true_place=has_true, valid=valid, match_distance=dist)
+    The tie rule of the matcher (module docstring): `D` is converted to `dtype` first, and a
+    candidate counts as nearer when its distance is lower, or equal with a lower index."""
+    if dtype not in ("float32", "float64"):
+        raise ConfigError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    Dm = np.ascontiguousarray(D, dtype=np.dtype(dtype))
+    if Dm.ndim != 2 or len(true_places) != Dm.shape[0]:
+        raise DataError(f"need an (Nq, Ndb) matrix and one index array per query, got "
+                        f"{Dm.shape} and {len(true_places)}")
+    nq, ndb = Dm.shape
+    limit = np.full(nq, ndb, np.int64) if db_limit is None else np.asarray(db_limit, np.int64)
+    best = np.zeros(nq, Dm.dtype)
+    jbest = np.full(nq, -1, np.int64)  # -1: no true place
+    for i, js in enumerate(true_places):
+        js = np.asarray(js, dtype=np.int64)
+        if js.size == 0:
+            continue
+        if js.min() < 0 or js.max() >= limit[i]:
+            raise DataError(f"query {i}: a true place {js.max()} is not a candidate "
+                            f"(candidates: j < {limit[i]})")
+        vals = Dm[i, js]
+        k = int(np.argmin(vals))  # first minimum; `js` is sorted, so the lowest index
+        best[i], jbest[i] = vals[k], js[k]
+    ranks = np.zeros(nq, np.int64)
+    cols = np.arange(ndb)
+    rows = np.flatnonzero(jbest >= 0)
+    for start in range(0, rows.size, 256):  # row blocks: a few MB at a time
+        r = rows[start:start + 256]
+        b, jb = best[r, None], jbest[r, None]
+        nearer = (Dm[r] < b) | ((Dm[r] == b) & (cols < jb))
+        nearer &= cols < limit[r, None]
+        ranks[r] = np.count_nonzero(nearer, axis=1) + 1
+    return ranks
 
 
-def evaluate_labels(confidence: np.ndarray, labels: Labels, *,
-                    precision_level: float = 1.0) -> Metrics:
-    """`evaluate` with the arrays of a `Labels`."""
-    return evaluate(confidence, labels.is_correct, labels.has_true_place, valid=labels.valid,
-                    precision_level=precision_level)
+def recall_at_n(ranks: np.ndarray, has_true_place: np.ndarray,
+                ns: Sequence[int]) -> dict[int, float]:
+    """Recall@N: the share of the queries with a true place whose nearest true place ranks
+    within the first N (`true_place_ranks`)."""
+    ranks = np.asarray(ranks)[np.asarray(has_true_place, bool)]
+    if not ranks.size:
+        return {}
+    return {int(k): float(np.count_nonzero(ranks <= k) / ranks.size) for k in ns}

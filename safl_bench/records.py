@@ -10,10 +10,18 @@ environment and when it was made. Files live at
 and are written atomically. Loading validates every field: a file that is not valid JSON, lacks
 a key, has a value of the wrong type or a non-finite number raises `CorruptRecordError` naming
 the file, so callers report it and recompute instead of using it.
+
+Every record says which definitions of the measures made it (``metrics_version``, see
+`safl_bench.metrics`; records without it are version 1). Since version 2 a record also holds
+each query's outcome (``results.<mode>.queries``: confidence, label, true place, candidate,
+rank of the nearest true place), so `rescore` recomputes its measures under newer definitions
+from what it holds. `load_records` rescores such records and reports the older ones it cannot
+rescore as problems with the command that recomputes them: no table mixes versions.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -29,6 +37,7 @@ import numpy as np
 from safl_bench.atomic import atomic_write_text
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.fingerprint import to_jsonable
+from safl_bench.metrics import METRICS_VERSION, RECALL_AT, Outcomes, evaluate_outcomes
 from safl_bench.provenance import Environment, collect_environment
 
 if TYPE_CHECKING:
@@ -92,13 +101,13 @@ class TaskInfo:
 
 @dataclass(frozen=True)
 class Metrics:
-    """Scalar metrics of one matching mode. Rates are fractions in [0, 1].
+    """The measures of one matching mode, as `safl_bench.metrics` defines them (its table
+    gives each one's formula and denominator). Rates are fractions in [0, 1]; None where
+    undefined (auc with one class only) or not measured by the record's metrics version.
 
-    A rate is None only where it is undefined (no positives in the task).
-    recall_at_1: the fraction of queries with a true place whose reported (top-1) match is one;
-    recall_at_n: {"N": fraction} of those with a true place among the N nearest database frames
-    (single-frame mode only: the sequence matcher reports one match). Both are None in records
-    made before they were measured.
+    n_positives: queries with a true place (fixed by the ground truth: the same for every method
+    on a task); n_correct: correct reported matches (the ``_of_correct`` denominator); n_scored:
+    queries with a candidate (the others are left out of every measure).
     """
 
     recall_at_100_precision: float | None
@@ -109,6 +118,45 @@ class Metrics:
     n_positives: int
     recall_at_1: float | None = None
     recall_at_n: dict[str, float] | None = None
+    recall_at_100_precision_of_correct: float | None = None
+    f1_max_of_correct: float | None = None
+    extended_precision_of_correct: float | None = None
+    n_scored: int | None = None
+    n_correct: int | None = None
+
+
+@dataclass(frozen=True)
+class QueryOutcomes:
+    """Each scored query's outcome (`safl_bench.metrics.Outcomes` as JSON): what the measures
+    read, so that they can be recomputed from the record. confidence: None = no match
+    reported; label: 1 correct, 0 ambiguous, -1 wrong; has_true_place, has_candidate: 0 or 1;
+    true_rank: rank of the nearest true place (0 = none), single-frame mode only."""
+
+    confidence: list[float | None]
+    label: list[int]
+    has_true_place: list[int]
+    has_candidate: list[int]
+    true_rank: list[int] | None = None
+
+    @classmethod
+    def of(cls, o: Outcomes) -> QueryOutcomes:
+        return cls(
+            confidence=[float(c) if math.isfinite(c) else None for c in o.confidence.tolist()],
+            label=[int(v) for v in o.label.tolist()],
+            has_true_place=[int(v) for v in o.has_true_place.tolist()],
+            has_candidate=[int(v) for v in o.has_candidate.tolist()],
+            true_rank=None if o.true_rank is None else [int(v) for v in o.true_rank.tolist()],
+        )
+
+    def outcomes(self) -> Outcomes:
+        return Outcomes(
+            confidence=np.array([-math.inf if c is None else c for c in self.confidence],
+                                dtype=np.float64),
+            label=np.array(self.label, dtype=np.int8),
+            has_true_place=np.array(self.has_true_place, dtype=bool),
+            has_candidate=np.array(self.has_candidate, dtype=bool),
+            true_rank=None if self.true_rank is None else np.array(self.true_rank, np.int64),
+        )
 
 
 @dataclass(frozen=True)
@@ -137,10 +185,12 @@ class Curves:
 
 @dataclass(frozen=True)
 class ModeResult:
-    """Metrics and curves of one matching mode."""
+    """Metrics and curves of one matching mode, and (metrics version 2 on) each query's
+    outcome."""
 
     metrics: Metrics
     curves: Curves
+    queries: QueryOutcomes | None = None
 
 
 @dataclass(frozen=True)
@@ -174,6 +224,8 @@ class ResultRecord:
     environment: Environment
     created: str  # UTC, ISO 8601
     schema: int = SCHEMA_VERSION
+    #: the version of `safl_bench.metrics` that scored it (a file without one is version 1)
+    metrics_version: int = METRICS_VERSION
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -230,6 +282,7 @@ def make_mode_result(
     recall: Sequence[float] | np.ndarray,
     fpr: Sequence[float] | np.ndarray,
     tpr: Sequence[float] | np.ndarray,
+    queries: QueryOutcomes | None = None,
 ) -> ModeResult:
     """A ModeResult with the curves downsampled to MAX_CURVE_POINTS."""
     p, r = downsample_curve(precision, recall)
@@ -237,11 +290,14 @@ def make_mode_result(
     return ModeResult(
         metrics=metrics,
         curves=Curves(pr=PRCurve(precision=p, recall=r), roc=ROCCurve(fpr=f, tpr=t)),
+        queries=queries,
     )
 
 
-def mode_result_from_evaluation(evaluation: Evaluation) -> ModeResult:
-    """A ModeResult from `safl_bench.metrics.evaluate`'s output (curves downsampled)."""
+def mode_result_from_evaluation(evaluation: Evaluation,
+                                outcomes: Outcomes | None = None) -> ModeResult:
+    """A ModeResult from `safl_bench.metrics.evaluate`'s output (curves downsampled) and the
+    per-query `outcomes` it was computed from."""
     return make_mode_result(
         Metrics(
             recall_at_100_precision=float(evaluation.recall_at_100),
@@ -250,15 +306,69 @@ def mode_result_from_evaluation(evaluation: Evaluation) -> ModeResult:
             extended_precision=float(evaluation.extended_precision),
             n_queries=int(evaluation.n_queries),
             n_positives=int(evaluation.n_positive),
-            recall_at_1=evaluation.recall_at_1,
+            recall_at_1=float(evaluation.recall_at_1),
             recall_at_n=({str(n): float(v) for n, v in evaluation.recall_at_n.items()}
                          if evaluation.recall_at_n else None),
+            recall_at_100_precision_of_correct=float(evaluation.recall_at_100_of_correct),
+            f1_max_of_correct=float(evaluation.f1_max_of_correct),
+            extended_precision_of_correct=float(evaluation.extended_precision_of_correct),
+            n_scored=int(evaluation.n_scored),
+            n_correct=int(evaluation.n_correct),
         ),
         precision=evaluation.precision,
         recall=evaluation.recall,
         fpr=evaluation.fpr,
         tpr=evaluation.tpr,
+        queries=None if outcomes is None else QueryOutcomes.of(outcomes),
     )
+
+
+class OutdatedRecordError(DataError):
+    """A record scored with older definitions of the measures that holds no per-query outcomes
+    to rescore it from."""
+
+
+def rerun_command(record: ResultRecord) -> str:
+    """The command that recomputes `record` with this code."""
+    root = {"kitti": " --kitti-root DIR", "bev": " --bev-root DIR"}.get(record.task.source_kind, "")
+    return (f"safl-bench run --method {record.method.name}@{record.method.version} "
+            f"--task {record.task.id} --seed {record.seed}{root} --force")
+
+
+def unchanged_by_version_2(record: ResultRecord) -> bool:
+    """Whether a metrics-version-1 record's measures are version 2's: version 2 changed only
+    what an ambiguous match (a band between the true- and false-positive radii) and a query
+    without a candidate (a time window) count as, and a task with neither is scored the same
+    by both (measured: every paper- and BEVPlace-protocol cell of SAD, BiGAN and Stable-AFL
+    recomputed to the same values). Such a record lacks only the measures version 2 added."""
+    spec = record.task.spec
+    return (record.metrics_version == 1 and spec.get("window_s") is None
+            and spec.get("tp_radius_m") is not None
+            and spec.get("tp_radius_m") == spec.get("fp_radius_m"))
+
+
+def rescore(record: ResultRecord) -> ResultRecord:
+    """`record` with its measures and curves under this code's metrics version: recomputed from
+    the per-query outcomes it holds (unchanged when it already is of this version, or when it
+    is a version-1 record whose measures version 2 did not change: `unchanged_by_version_2`,
+    kept with its version so that it says what it lacks). Raises OutdatedRecordError for any
+    other older record without outcomes."""
+    if record.metrics_version == METRICS_VERSION:
+        return record
+    if any(mode.queries is None for mode in record.results.values()):
+        if unchanged_by_version_2(record):
+            return record
+        raise OutdatedRecordError(
+            f"scored with metrics version {record.metrics_version} (this code: "
+            f"{METRICS_VERSION}) and holds no per-query outcomes to rescore; recompute it: "
+            f"{rerun_command(record)}")
+    results = {}
+    for name, mode in record.results.items():
+        assert mode.queries is not None
+        o = mode.queries.outcomes()
+        results[name] = mode_result_from_evaluation(
+            evaluate_outcomes(o, recall_at=RECALL_AT if o.true_rank is not None else ()), o)
+    return dataclasses.replace(record, results=results, metrics_version=METRICS_VERSION)
 
 
 def task_info(spec: TaskSpec, source_label: str, **extra: Any) -> TaskInfo:
@@ -289,7 +399,8 @@ def new_record(
     timings: Timings,
     environment: Environment | None = None,
 ) -> ResultRecord:
-    """A record stamped now (UTC), with this process's environment unless one is given.
+    """A record stamped now (UTC), with this process's environment unless one is given, scored
+    with this code's metrics version.
 
     `matcher` may be a dict or a dataclass such as `MatcherConfig` (stored as JSON).
     """
@@ -305,6 +416,7 @@ def new_record(
         timings=timings,
         environment=environment if environment is not None else collect_environment(),
         created=utc_now(),
+        metrics_version=METRICS_VERSION,
     )
 
 
@@ -349,7 +461,7 @@ def write_record(results_dir: str | os.PathLike[str], record: ResultRecord) -> P
     return path
 
 
-_NUMBER_LIST = re.compile(r"\[\s*([-+0-9.eE,\s]+?)\s*\]")
+_NUMBER_LIST = re.compile(r"\[\s*((?:[-+0-9.eE]+|null)(?:\s*,\s*(?:[-+0-9.eE]+|null))*)\s*\]")
 
 
 def dumps_record(data: dict[str, Any]) -> str:
@@ -412,7 +524,8 @@ def load_records(results_dir: str | os.PathLike[str]) -> tuple[list[ResultRecord
     """All valid records under `results_dir` (sorted by key), and the files that were not.
 
     Corrupt files are skipped and listed as problems by name; so are files whose run another
-    file already holds (the newer `created` wins). Temporary files of interrupted writes
+    file already holds (the newer `created` wins), and records of an older metrics version that
+    cannot be rescored (`rescore`; the problem says what to run). Rescorable ones are rescored. Temporary files of interrupted writes
     (dot-files) are ignored. A missing directory gives no records and no problems.
     """
     root = Path(results_dir)
@@ -427,6 +540,11 @@ def load_records(results_dir: str | os.PathLike[str]) -> tuple[list[ResultRecord
             record = load_record(path)
         except CorruptRecordError as exc:
             problems.append(Problem(path, exc.reason))
+            continue
+        try:
+            record = rescore(record)
+        except OutdatedRecordError as exc:
+            problems.append(Problem(path, str(exc)))
             continue
         previous = by_key.get(record.key)
         if previous is not None:
@@ -463,6 +581,7 @@ class EvaluatedCell:
     describe_frames_per_s: float  # batched throughput measured while evaluating
     matcher_s: float
     evaluated_on: str  # "this process", "2 local worker processes", "Ray cluster (auto)"
+    metrics_version: int = METRICS_VERSION
 
 
 def evaluated_path(
@@ -640,6 +759,11 @@ def _parse_mode(r: _Reader, data: Any, where: str) -> ModeResult:
         n_positives=r.get(m, "n_positives", mw, r.int_),
         recall_at_1=r.rate(m.get("recall_at_1"), f"{mw}.recall_at_1"),
         recall_at_n=r.rates(m.get("recall_at_n"), f"{mw}.recall_at_n"),
+        **{key: r.rate(m.get(key), f"{mw}.{key}") for key in (
+            "recall_at_100_precision_of_correct", "f1_max_of_correct",
+            "extended_precision_of_correct")},
+        n_scored=r.opt_int(m.get("n_scored"), f"{mw}.n_scored"),
+        n_correct=r.opt_int(m.get("n_correct"), f"{mw}.n_correct"),
     )
     c = r.get(d, "curves", where, r.dict_)
     cw = f"{where}.curves"
@@ -657,7 +781,39 @@ def _parse_mode(r: _Reader, data: Any, where: str) -> ModeResult:
         raise r.fail(f"{cw}.pr", "precision and recall differ in length")
     if len(roc.fpr) != len(roc.tpr):
         raise r.fail(f"{cw}.roc", "fpr and tpr differ in length")
-    return ModeResult(metrics=metrics, curves=Curves(pr=pr, roc=roc))
+    queries = None if d.get("queries") is None else _parse_queries(r, d["queries"], f"{where}.queries")
+    return ModeResult(metrics=metrics, curves=Curves(pr=pr, roc=roc), queries=queries)
+
+
+def _parse_queries(r: _Reader, data: Any, where: str) -> QueryOutcomes:
+    d = r.obj(data, where)
+
+    def ints(key: str, allowed: tuple[int, ...] | None) -> list[int]:
+        values = r.get(d, key, where, lambda v, w: v)
+        if not isinstance(values, list) or any(
+                isinstance(v, bool) or not isinstance(v, int)
+                or (v not in allowed if allowed else v < 0) for v in values):
+            raise r.fail(f"{where}.{key}", "expected a list of integers"
+                         + (f" in {allowed}" if allowed else " >= 0"))
+        return values
+
+    conf = r.get(d, "confidence", where, lambda v, w: v)
+    if not isinstance(conf, list) or any(
+            c is not None and (isinstance(c, bool) or not isinstance(c, int | float)
+                               or not math.isfinite(c)) for c in conf):
+        raise r.fail(f"{where}.confidence", "expected a list of finite numbers or null")
+    out = QueryOutcomes(
+        confidence=[None if c is None else float(c) for c in conf],
+        label=ints("label", (-1, 0, 1)),
+        has_true_place=ints("has_true_place", (0, 1)),
+        has_candidate=ints("has_candidate", (0, 1)),
+        true_rank=None if d.get("true_rank") is None else ints("true_rank", None),
+    )
+    lengths = {len(out.confidence), len(out.label), len(out.has_true_place),
+               len(out.has_candidate)} | ({len(out.true_rank)} if out.true_rank is not None else set())
+    if len(lengths) != 1:
+        raise r.fail(where, "its per-query lists differ in length")
+    return out
 
 
 def _parse_timings(r: _Reader, data: Any) -> Timings:
@@ -706,7 +862,18 @@ def _parse_record(r: _Reader, data: Any) -> ResultRecord:
         environment=_parse_environment(r, r.get(d, "environment", "", lambda v, w: v)),
         created=created,
         schema=schema,
+        metrics_version=_metrics_version(r, d, ""),
     )
+
+
+def _metrics_version(r: _Reader, d: dict[str, Any], where: str) -> int:
+    """The record's metrics version (1 when absent: records from before it was stored)."""
+    key = f"{where}.metrics_version" if where else "metrics_version"
+    version = r.int_(d.get("metrics_version", 1), key)
+    if not 1 <= version <= METRICS_VERSION:
+        raise r.fail(key, f"version {version} is newer than this code's {METRICS_VERSION}: "
+                          "upgrade safl-bench to read it")
+    return version
 
 
 def _parse_results(r: _Reader, d: dict[str, Any]) -> dict[str, ModeResult]:
@@ -732,5 +899,6 @@ def _parse_evaluated(r: _Reader, data: Any) -> EvaluatedCell:
         describe_frames_per_s=r.get(d, "describe_frames_per_s", "", r.float_),
         matcher_s=r.get(d, "matcher_s", "", r.float_),
         evaluated_on=r.get(d, "evaluated_on", "", r.nonempty_str),
+        metrics_version=_metrics_version(r, d, ""),
     )
 

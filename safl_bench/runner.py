@@ -24,11 +24,13 @@ from typing import Any
 from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method, same_settings
 from safl_bench.method import Method, input_note, method_input
+from safl_bench.metrics import METRICS_VERSION, NoPositivesError
 from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.records import (
     CorruptRecordError,
     EvaluatedCell,
     MethodInfo,
+    OutdatedRecordError,
     ResultRecord,
     TaskInfo,
     Timings,
@@ -38,6 +40,7 @@ from safl_bench.records import (
     mode_result_from_evaluation,
     new_record,
     record_path,
+    rescore,
     task_info,
     write_evaluated,
     write_record,
@@ -71,7 +74,7 @@ class CellOutcome:
 
     task_id: str
     seed: int
-    status: str  # "computed", "reused" or "failed"
+    status: str  # "computed", "reused", "rescored" or "failed"
     path: Path
     record: ResultRecord | None = None
     message: str = ""
@@ -136,9 +139,22 @@ def _existing(
             log(f"warning: {exc}; recomputing it")
         else:
             why = _same_run(old.method, old.task, old.matcher, info, registered.fingerprint, matcher)
-            if not why:
+            if not why and old.metrics_version == METRICS_VERSION:
                 return seed, CellOutcome(registered.id, seed, "reused", path, old, method=info.name)
-            log(f"note: {path} was made with other settings ({why}); recomputing it")
+            if not why:
+                try:
+                    new: ResultRecord | None = rescore(old)
+                except OutdatedRecordError:
+                    new = None
+                if new is not None and new.metrics_version == METRICS_VERSION:
+                    written = write_record(options.results_dir, new)
+                    return seed, CellOutcome(registered.id, seed, "rescored", written, new,
+                                             method=info.name)
+                log(f"note: {path} was scored with metrics version {old.metrics_version} "
+                    f"(this code: {METRICS_VERSION}) and holds no per-query outcomes; "
+                    "recomputing it (its timings are kept)")
+            else:
+                log(f"note: {path} was made with other settings ({why}); recomputing it")
     pending = evaluated_path(options.results_dir, info.name, info.version, registered.id, seed)
     if pending.is_file():
         try:
@@ -146,7 +162,7 @@ def _existing(
         except CorruptRecordError as exc:
             log(f"warning: {exc}; evaluating the cell again")
         else:
-            if cell.seed == seed and not _same_run(
+            if cell.seed == seed and cell.metrics_version == METRICS_VERSION and not _same_run(
                 cell.method, cell.task, cell.matcher, info, registered.fingerprint, matcher
             ):
                 return seed, cell
@@ -182,10 +198,14 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
     kind = method.input_kind
     task.prepare([kind])
     queries, database = task.queries(kind), task.database(kind)
-    evaluation = evaluate_method(
-        method, method_input(method, queries), method_input(method, database), task.truth,
-        config=options.evaluation, revisit=task.spec.protocol == "revisit",
-    )
+    try:
+        evaluation = evaluate_method(
+            method, method_input(method, queries), method_input(method, database), task.truth,
+            config=options.evaluation, revisit=task.spec.protocol == "revisit",
+        )
+    except NoPositivesError as exc:
+        raise NoPositivesError(f"task {registered.id} (seed {task.spec.seed}): {exc}; its "
+                               "ground truth leaves nothing to recall") from None
     data = task.info()
     extra = {key: data[key] for key in ("data_notes",) if key in data}
     note = input_note(method, database)
@@ -202,10 +222,12 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
         ),
         seed=task.spec.seed,
         matcher=options.evaluation.to_dict(),
-        results={m: mode_result_from_evaluation(evaluation.metrics[m]) for m in MODES},
+        results={m: mode_result_from_evaluation(evaluation.metrics[m], evaluation.outcomes[m])
+                 for m in MODES},
         describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
         matcher_s=evaluation.matcher_s,
         evaluated_on=where,
+        metrics_version=METRICS_VERSION,
     )
 
 
@@ -214,7 +236,13 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
     """Time the method at batch 1 on the cell's queries (in this process, pinned to fixed CPUs,
     nothing else of the run competing for them), write the record atomically and drop the
     cell's evaluated file if a parallel run left one. `task`: the cell's task if this process
-    already has it (its views are loaded), else it is opened again."""
+    already has it (its views are loaded), else it is opened again.
+
+    A record of the same run that only an older metrics version made keeps its timings (the
+    measures changed, not the method: `how_run` says which run timed it), unless `force`."""
+    carried = None if options.force else _carried_timings(options, cell)
+    if carried is not None:
+        return _write(options, cell, carried)
     if task is None:
         task = _task(spec(cell.task.id), cell.seed, options, progress=False, method=method)
     queries = method_input(method, task.queries(method.input_kind))
@@ -238,6 +266,28 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
         repeats=options.timing_repeats,
         how_run=how_run,
     )
+    return _write(options, cell, timings)
+
+
+def _carried_timings(options: RunOptions, cell: EvaluatedCell) -> Timings | None:
+    """The timings of the existing record of this very run (same method settings, task and
+    matcher) when it is of an older metrics version (`finish_cell`), else None."""
+    path = record_path(options.results_dir, cell.method.name, cell.method.version, cell.task.id,
+                       cell.seed)
+    try:
+        old = load_record(path) if path.is_file() else None
+    except CorruptRecordError:
+        return None
+    if old is None or old.metrics_version == METRICS_VERSION or _same_run(
+            old.method, old.task, old.matcher, cell.method, cell.task.spec_fingerprint,
+            cell.matcher):
+        return None
+    note = (f"timed by the run of {old.created} (git {old.environment.git_revision}); "
+            f"rescored with metrics version {METRICS_VERSION}")
+    return dataclasses.replace(old.timings, how_run=f"{old.timings.how_run}; {note}")
+
+
+def _write(options: RunOptions, cell: EvaluatedCell, timings: Timings) -> CellOutcome:
     record = new_record(
         method=cell.method, task=cell.task, seed=cell.seed, matcher=cell.matcher,
         results=cell.results, timings=timings,
@@ -459,8 +509,10 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
              for r in (header, *rows)]
     lines.insert(1, "  ".join("-" * w for w in widths))
+    legend = (f"R@100%P, F1max, R@1: recall over the queries with a true place (metrics version "
+              f"{METRICS_VERSION}; recall over correct matches is in the records)")
     note = zeros_note(outcomes)
-    return "\n".join(lines + ([note] if note else []))
+    return "\n".join([*lines, legend] + ([note] if note else []))
 
 
 def zeros_note(outcomes: Sequence[CellOutcome]) -> str:

@@ -12,7 +12,6 @@ from conftest import write_bev
 from safl_bench import tasks
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.metrics import retrieval_recall
 from safl_bench.resample import coverage, fit_input, move_viewpoint
 from safl_bench.sources import bev as bev_module
 from safl_bench.sources import bev_source
@@ -213,13 +212,3 @@ def test_fit_input_resamples_only_other_sizes() -> None:
     small = fit_input(maps, 64)
     assert small.shape == (3, 64, 64) and 0.0 <= small.min() and small.max() <= 1.0
     assert abs(float(small.mean()) - float(maps.mean())) < 1e-3
-
-
-def test_retrieval_recall_counts_true_places_among_the_nearest() -> None:
-    D = np.array([[0.1, 0.5, 0.9], [0.9, 0.2, 0.1], [0.3, 0.2, 0.1]])
-    truth = np.array([[True, False, False], [True, False, False], [False, False, False]])
-    recall = retrieval_recall(D, truth.any(axis=1), lambda q, j: truth[q, j], (1, 2, 3))
-    assert recall == {1: 0.5, 2: 0.5, 3: 1.0}  # query 2 has no true place: not counted
-    limited = retrieval_recall(D, truth.any(axis=1), lambda q, j: truth[q, j], (1, 3),
-                               db_limit=np.array([3, 1, 3]))
-    assert limited == {1: 1.0, 3: 1.0}  # query 1 may only match frame 0

@@ -196,8 +196,8 @@ def _files(root: Path) -> dict[str, bytes]:
 def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> None:
     records = [*_paper_records(), make_record("stable_afl", protocol="revisit", sequence="00")]
     out1, out2 = tmp_path / "lb1", tmp_path / "lb2"
-    build_leaderboard(records, out1, figures=False)
-    report = build_leaderboard(list(reversed(records)), out2, figures=False)
+    build_leaderboard(records, out1, figures=False, site=False)
+    report = build_leaderboard(list(reversed(records)), out2, figures=False, site=False)
     files = _files(out1)
     assert files == _files(out2)
     assert set(files) == {
@@ -211,12 +211,15 @@ def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> Non
         f"tables/{SRC}/revisit-v0.md",
         f"tables/{SRC}/revisit-v0.csv",
     }
-    assert report.headline is not None and report.headline.key.sequence == "00"
+    # the revisit protocol heads the board (what the field reports), the paper's tables follow
+    assert report.headline is not None and report.headline.key.protocol == "revisit"
     index = files["index.md"].decode()
-    assert "## Headline" in index and "| stable_afl | 1 | sequence | **90.9** | 58.4 |" in index
+    assert "## Headline" in index and "**Protocol:** revisit" in index.split("## Headline")[1]
+    recall = files[f"tables/{SRC}/paper-00-v0-recall.md"].decode()
+    assert "| stable_afl | 1 | sequence | **90.9** | 58.4 |" in recall
     # Regenerating without the revisit record removes its table and keeps hand-written files.
     (out1 / "README.md").write_text("hand-written\n")
-    report = build_leaderboard(records[:3], out1, figures=False)
+    report = build_leaderboard(records[:3], out1, figures=False, site=False)
     assert not (out1 / f"tables/{SRC}/revisit-v0.md").exists()
     assert [p.name for p in report.removed] == ["revisit-v0.csv", "revisit-v0.md"]
     assert (out1 / "README.md").read_text() == "hand-written\n"
@@ -335,7 +338,7 @@ def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
         records, tmp_path, training_logs=REPO_BOARD / "training-logs", skipped=problems,
         preset_records=load_preset_records(REPO_BOARD)[0],
     )
-    _committed(tmp_path, ("tables", "figures"))
+    _committed(tmp_path, ("tables", "figures", "site"))
     assert (tmp_path / "index.md").read_bytes() == (REPO_BOARD / "index.md").read_bytes()
 
 

@@ -176,3 +176,24 @@ def test_records_built_from_a_task_spec_and_an_evaluation(tmp_path: Path) -> Non
     )
     assert record.matcher["ds"] == 10 and record.created.endswith("Z")
     assert load_record(write_record(tmp_path, record)) == record
+
+
+def test_version_1_records_are_kept_only_where_version_2_scores_the_same(tmp_path: Path) -> None:
+    import json
+
+    from record_factory import make_record
+
+    from safl_bench.records import load_records, write_record
+
+    paper = write_record(tmp_path, make_record("a"))
+    revisit = write_record(tmp_path, make_record("b", protocol="revisit", condition=None))
+    for path, spec in ((paper, {"tp_radius_m": 10.0, "fp_radius_m": 10.0, "window_s": None}),
+                       (revisit, {"tp_radius_m": 3.0, "fp_radius_m": 20.0, "window_s": 30.0})):
+        data = json.loads(path.read_text())
+        data.pop("metrics_version")
+        data["task"]["spec"].update(spec)
+        path.write_text(json.dumps(data))
+    records, problems = load_records(tmp_path)
+    assert [r.method.name for r in records] == ["a"] and records[0].metrics_version == 1
+    assert len(problems) == 1 and problems[0].path == revisit
+    assert "metrics version 1" in problems[0].reason and "safl-bench run --method b@1" in problems[0].reason

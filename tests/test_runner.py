@@ -230,3 +230,46 @@ def test_a_method_reads_views_in_its_own_encoding(tiny_tasks, kitti_root, tmp_pa
 def test_a_point_cloud_method_runs_a_cell(tiny_tasks, kitti_root, tmp_path):
     out = runner.run_cell(make_method("scan_context"), tiny_tasks[0], options(kitti_root, tmp_path))
     assert out.status == "computed" and "method_input" not in out.record.task.spec
+
+
+def test_a_record_of_an_older_metrics_version_is_rescored_or_recomputed(tiny_tasks, kitti_root,
+                                                                       tmp_path):
+    sad = make_method("sad")
+    first = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path))
+    data = json.loads(first.path.read_text())
+    good = data["results"]["sequence"]["metrics"]["f1_max"]
+    # version 1 in name only, with its per-query outcomes: rescored from them, not recomputed
+    data["metrics_version"] = 1
+    data["results"]["sequence"]["metrics"]["f1_max"] = 0.0
+    first.path.write_text(json.dumps(data))
+    again = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path))
+    assert again.status == "rescored" and again.record is not None
+    assert again.record.metrics_version == 2
+    assert again.record.results["sequence"].metrics.f1_max == pytest.approx(good)
+    assert again.record.created == json.loads(first.path.read_text())["created"]
+    # a real version-1 record holds no outcomes: recomputed, keeping the run's timings
+    for mode in data["results"].values():
+        del mode["queries"]
+    first.path.write_text(json.dumps(data))
+    said: list[str] = []
+    redone = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path), log=said.append)
+    assert redone.status == "computed" and "metrics version 1" in said[0]
+    assert redone.record is not None and redone.record.metrics_version == 2
+    assert redone.record.timings.describe_ms_per_frame == data["timings"]["describe_ms_per_frame"]
+    assert "timed by the run of" in redone.record.timings.how_run
+    assert redone.record.results["sequence"].metrics.f1_max == pytest.approx(good)
+
+
+def test_a_task_whose_ground_truth_has_no_positive_is_named(kitti_root, safl_home, tmp_path):
+    # a 30 s window on 12 frames at 10 Hz: no query has a candidate, so none has a true place
+    task_id = "Test/TinyRun-Revisit-v0"
+    tasks.register(task_id, source="kitti", sequence="00", protocol="revisit", step=1,
+                   tp_radius_m=3.0, fp_radius_m=20.0, window_s=30.0, map_config=MapConfig(size=32))
+    try:
+        out = runner.run_grid([make_method("sad")], [task_id], options(kitti_root, tmp_path),
+                              log=lambda message: None)
+    finally:
+        tasks.unregister(task_id)
+    assert out[0].status == "failed"
+    assert out[0].message.startswith(f"task {task_id} (seed 0): no query has a true place")
+    assert "\n" not in out[0].message

@@ -4,7 +4,8 @@ Defaults make the leaderboard directory self-contained: it holds its records (re
 records of the same tasks under other matcher presets (preset-records/<preset>/: a record's path
 does not name its preset) and training logs (training-logs/) beside the generated tables and
 figures, so running the command at the root of a safl-bench checkout rebuilds the committed
-leaderboard exactly.
+leaderboard exactly. It also writes the web pages (OUT/site/index.html, opened from disk) and,
+when OUT is a checkout's leaderboard/, the headline block of that checkout's README.md.
 """
 
 from __future__ import annotations
@@ -14,9 +15,11 @@ import sys
 from pathlib import Path
 
 from safl_bench.leaderboard import build_leaderboard
+from safl_bench.leaderboard.headline import update_readme
+from safl_bench.matcher_presets import label
 from safl_bench.records import Problem, ResultRecord, load_records
 
-HELP = "regenerate the leaderboard (Markdown/CSV tables and PNG figures) from result records"
+HELP = "regenerate the leaderboard (Markdown/CSV tables, PNG figures, web pages) from result records"
 
 
 def default_out_dir(cwd: Path | None = None) -> Path:
@@ -71,6 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-figures", action="store_true", help="write the tables only (faster; no PNGs)"
     )
+    parser.add_argument(
+        "--no-site", action="store_true", help="do not write the web pages (OUT/site/)"
+    )
 
 
 def main(args: argparse.Namespace) -> int:
@@ -79,6 +85,8 @@ def main(args: argparse.Namespace) -> int:
     logs = Path(args.training_logs) if args.training_logs else out / "training-logs"
     records, problems = load_records(results)
     preset_records, bad = load_preset_records(out)
+    shown = {id(r): _shown(out / "preset-records" / label(r.matcher)) for r in preset_records}
+    results_shown = _shown(results)
     problems += bad
     for problem in problems:
         print(f"safl-bench: warning: skipped record {problem}", file=sys.stderr)
@@ -90,6 +98,8 @@ def main(args: argparse.Namespace) -> int:
         skipped_base=results,
         figures=not args.no_figures,
         preset_records=preset_records,
+        site=not args.no_site,
+        records_folder=lambda record: shown.get(id(record), results_shown),
     )
     for problem in report.problems:
         if problem not in problems:
@@ -102,4 +112,19 @@ def main(args: argparse.Namespace) -> int:
         print()
         print(report.headline.markdown(level=3), end="")
     print(f"\nindex: {out / 'index.md'}")
+    if not args.no_site:
+        print(f"site: {out / 'site' / 'index.html'}")
+    readme = out.parent / "README.md"
+    if report.headline is not None and out.resolve() == default_out_dir().resolve() and readme.is_file():
+        if update_readme(readme, report.headline, report.headline_records):
+            print(f"README headline: {readme}")
     return 0
+
+
+def _shown(path: Path) -> str:
+    """`path` as a reader at the checkout's root names it (relative when it is inside)."""
+    root = default_out_dir().parent.resolve()
+    try:
+        return Path(path).resolve().relative_to(root).as_posix()
+    except ValueError:
+        return Path(path).as_posix()

@@ -114,7 +114,8 @@ def main(args: argparse.Namespace) -> int:
     for source, ids in by_source.items():
         methods = [make_method(name, weights=args.weights, source=source, **params) for name in names]
         outcomes += run_grid(methods, ids, options, seeds=seeds, parallel=parallel)
-    print(f"{', '.join(f'{n}@{method_class(n).version}' for n in names)} — records in {options.results_dir}")
+    labels = ', '.join(f"{n.partition('@')[0]}@{method_class(n).version}" for n in names)
+    print(f"{labels} — records in {options.results_dir}")
     print(summary_table(outcomes))
     failed = [o for o in outcomes if o.status == "failed"]
     if failed:

@@ -13,6 +13,11 @@ generated and overwritten; generated files that a regeneration no longer produce
     figures/<source>/paper-<seq>-v<N>-pr-<method>-v<version>.png   Figures 10–12
     figures/<source>/revisit-v<N>-pr.png
     figures/training-stability-<source>.png            Figure 14 (from training logs)
+    site/                                      the same tables as web pages (leaderboard.site)
+
+The headline is the first table of real data (BEVPlace's top-view images of KITTI, then KITTI
+scans) before the synthetic default, the revisit protocol before the paper protocol: what the
+field reports today, on the data it reports it on.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from safl_bench.atomic import atomic_write_text
 from safl_bench.errors import DataError
 from safl_bench.leaderboard import figures as figs
 from safl_bench.leaderboard.grouping import TableKey, group_records, slugify, table_key
+from safl_bench.leaderboard.headline import READING, facts_markdown
 from safl_bench.leaderboard.tables import (
     F1_FORMAT,
     Table,
@@ -44,11 +50,34 @@ from safl_bench.leaderboard.tables import (
     time_table,
 )
 from safl_bench.leaderboard.training_logs import TrainingLog, load_training_logs
+from safl_bench.metrics import METRICS_VERSION
 from safl_bench.records import Problem, ResultRecord
 
-GENERATED_DIRS = ("tables", "figures")
-GENERATED_SUFFIXES = (".md", ".csv", ".png")
+GENERATED_DIRS = ("tables", "figures", "site")
+GENERATED_SUFFIXES = (".md", ".csv", ".png", ".html")
 UNKNOWN_SOURCE = "data source not recorded in the log"
+#: What every table showing a recall says about it (`safl_bench.metrics` defines each measure).
+RECALL_NOTE = (
+    f"Recall is over the queries with a true place (the same for every method on a task: fixed "
+    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.metrics`); recall over "
+    "correct matches (the paper's authors' and VPR-Bench's convention) is in the `_of_correct` "
+    "columns of tables/all-results.csv.")
+
+
+@dataclass
+class PublishedTable:
+    """One table as the leaderboard wrote it, with what the web pages need to explain its cells.
+
+    `rebuild` is the function that made `table` from `records`: the site calls it on one record
+    at a time to learn which record (seed) gives which cell, so it never re-derives a column.
+    """
+
+    key: TableKey
+    label: str
+    md: str  # the Markdown file, relative to the leaderboard directory
+    table: Table
+    records: list[ResultRecord]
+    rebuild: Callable[[list[ResultRecord]], Table]
 
 
 @dataclass
@@ -62,6 +91,12 @@ class BuildReport:
     headline: Table | None = None
     #: the headline condition's measures that do not collapse on one false positive
     headline_robust: list[Table] = field(default_factory=list)
+    #: the headline's records (its source, protocol, matcher presets and seeds are read from them)
+    headline_records: list[ResultRecord] = field(default_factory=list)
+    #: every table written, in the index's order, and the figures of each table group
+    tables: list[PublishedTable] = field(default_factory=list)
+    figure_links: dict[TableKey, list[tuple[str, str]]] = field(default_factory=dict)
+    training_figures: list[tuple[str, str, list[str]]] = field(default_factory=list)
 
 
 @dataclass
@@ -93,6 +128,18 @@ class _Writer:
         return rel
 
 
+def _version_1_note(group: Sequence[ResultRecord]) -> list[str]:
+    """A note naming the rows that come from metrics-version-1 records (kept because version 2
+    scores their task the same: `safl_bench.records.unchanged_by_version_2`)."""
+    old = sorted({f"{r.method.name} v{r.method.version}" for r in group if r.metrics_version == 1})
+    if not old:
+        return []
+    return [f"Rows of {', '.join(old)} come from metrics-version-1 records: version 2 scores this "
+            "protocol the same (no ambiguous band, no time window), but they hold no per-query "
+            "outcomes, so they have no `_of_correct` measures and no intervals; `safl-bench run "
+            "--force` recomputes them."]
+
+
 def build_leaderboard(
     records: Sequence[ResultRecord],
     out_dir: str | os.PathLike[str],
@@ -102,14 +149,19 @@ def build_leaderboard(
     skipped_base: str | os.PathLike[str] | None = None,
     figures: bool = True,
     preset_records: Sequence[ResultRecord] = (),
+    site: bool = True,
+    records_folder: Callable[[ResultRecord], str] | None = None,
 ) -> BuildReport:
     """Write the leaderboard for `records` into `out_dir` (see the module docstring).
 
     `skipped` lists record files the caller could not load; they are named in index.md
     (relative to `skipped_base` when given). `preset_records`: records of the same tasks made
     with other matcher presets (kept in their own folders, since a record's path does not name
-    its preset); each paper-protocol table of the top-view images gains a table by preset. Raises DataError when there are no records, so an
-    empty results directory never wipes a leaderboard.
+    its preset); each paper-protocol table of the top-view images gains a table by preset.
+    `site`: also write the web pages (`safl_bench.leaderboard.site`; `records_folder(record)`
+    names the folder each record was read from, for their provenance; by default the
+    committed layout, leaderboard/records and leaderboard/preset-records/<preset>). Raises DataError when
+    there are no records, so an empty results directory never wipes a leaderboard.
     """
     if not records:
         raise DataError(
@@ -122,30 +174,31 @@ def build_leaderboard(
     groups, group_notes = group_records(records)
     entries: list[_Entry] = []
     for key, group in groups.items():
-        notes = group_notes.get(key, [])
+        notes = [RECALL_NOTE, *_version_1_note(group), *group_notes.get(key, [])]
         base = f"{key.source_slug}/{key.stem}"
         entry = _Entry(key)
         if key.protocol == "paper":
             recall = recall_table(key, group, notes)
             auc = auc_table(key, group, notes)
-            timing = time_table(key, group, notes)
+            timing = time_table(key, group, notes[1:])
             heatmap = f"figures/{base}-auc-heatmap.png"
             f1 = paper_metric_table(key, group, metric="f1_max", title="F1max", fmt=F1_FORMAT,
                                     notes=notes)
             r1 = recall_at_1_table(key, group, notes)
-            for label, table, stem in (
-                ("Recall at 100 % precision (Table II)", recall, "recall"),
-                ("F1max", f1, "f1max"),
-                ("Recall@1", r1, "recall-at-1"),
-                ("ROC AUC (Figure 13)", auc, "auc"),
-                ("ms per frame (Table III)", timing, "time"),
+            for label, table, stem, rebuild in (
+                ("Recall at 100 % precision (Table II)", recall, "recall", partial(recall_table, key)),
+                ("F1max", f1, "f1max", partial(paper_metric_table, key, metric="f1_max",
+                                               title="F1max", fmt=F1_FORMAT)),
+                ("Recall@1", r1, "recall-at-1", partial(recall_at_1_table, key)),
+                ("ROC AUC (Figure 13)", auc, "auc", partial(auc_table, key)),
+                ("ms per frame (Table III)", timing, "time", partial(time_table, key)),
             ):
                 md = table.markdown(level=1)
-                entry.tables.append((label, writer.text(f"tables/{base}-{stem}.md", md)))
+                rel = writer.text(f"tables/{base}-{stem}.md", md)
+                entry.tables.append((label, rel))
+                report.tables.append(PublishedTable(key, label, rel, table, group, rebuild))
                 writer.text(f"tables/{base}-{stem}.csv", table.csv())
-            if report.headline is None or _headline_rank(key) < _headline_rank(report.headline.key):
-                report.headline = recall
-                report.headline_robust = [f1, r1, auc]
+            _offer_headline(report, recall, [f1, r1, auc], group)
             presets = [r for r in preset_records if table_key(r) == key]
             if key.source_kind == "bev" and presets:
                 for metric, stem, title in (
@@ -153,9 +206,15 @@ def build_leaderboard(
                     ("recall_at_1", "presets-recall-at-1", "Recall@1 (%)"),
                 ):
                     by_preset = preset_table(key, [*group, *presets], metric=metric,
-                                             title=f"Sequence matcher by preset: {title}")
+                                             title=f"Sequence matcher by preset: {title}",
+                                             notes=[RECALL_NOTE])
                     md = by_preset.markdown(level=1)
-                    entry.tables.append((f"by matcher preset, {title}", writer.text(f"tables/{base}-{stem}.md", md)))
+                    rel = writer.text(f"tables/{base}-{stem}.md", md)
+                    entry.tables.append((f"by matcher preset, {title}", rel))
+                    report.tables.append(PublishedTable(
+                        key, f"by matcher preset, {title}", rel, by_preset, [*group, *presets],
+                        partial(preset_table, key, metric=metric,
+                                title=f"Sequence matcher by preset: {title}")))
                     writer.text(f"tables/{base}-{stem}.csv", by_preset.csv())
                     entry.inline.append(by_preset.markdown(level=4))
             if figures:
@@ -178,7 +237,12 @@ def build_leaderboard(
             table = (bevplace_table if bevplace else revisit_table)(key, group, notes)
             md = table.markdown(level=1) + ("\n" + published_bevplace_markdown(2) if bevplace else "")
             label = "Recall@1/5/10, F1max" if bevplace else "F1max, recall at 100 % precision, AUC, Recall@1"
-            entry.tables.append((label, writer.text(f"tables/{base}.md", md)))
+            rel = writer.text(f"tables/{base}.md", md)
+            entry.tables.append((label, rel))
+            report.tables.append(PublishedTable(
+                key, label, rel, table, group, partial(bevplace_table if bevplace else revisit_table, key)))
+            if not bevplace:
+                _offer_headline(report, table, [], group)
             if key.source_kind == "bev":  # real KITTI: its tables stand in the index itself
                 entry.inline = [table.markdown(level=4)] + ([published_bevplace_markdown(4)] if bevplace else [])
             writer.text(f"tables/{base}.csv", table.csv())
@@ -188,6 +252,7 @@ def build_leaderboard(
                     ("PR curves", writer.figure(rel, partial(figs.revisit_pr_figure, key, group)))
                 )
         entries.append(entry)
+        report.figure_links[key] = entry.figures
 
     writer.text("tables/all-results.csv", frame_csv(all_results_frame(records)))
 
@@ -204,17 +269,36 @@ def build_leaderboard(
                 writer.figure(rel, partial(figs.training_figure, source_logs, source))
                 training.append((source, rel, [log.method for log in source_logs]))
 
+    report.training_figures = training
     report.problems.extend(skipped)
     index = _index(records, entries, report.headline, training, skipped, skipped_base, figures,
-                   report.headline_robust)
+                   report.headline_robust, report.headline_records)
     writer.text("index.md", index)
+    if site:
+        from safl_bench.leaderboard.site import default_records_folder, write_site
+
+        folder = records_folder or default_records_folder(preset_records)
+        report.written += write_site(report, records_folder=folder, problems=skipped,
+                                     problem_base=skipped_base)
     report.removed = _remove_stale(out, report.written)
     return report
 
 
-def _headline_rank(key: TableKey) -> tuple[object, ...]:
-    """Headline = paper protocol on the synthetic default first, lowest sequence, newest version."""
-    return (key.source_kind != "synth", key.source_label, key.sequence, -key.task_version)
+def headline_rank(key: TableKey) -> tuple[object, ...]:
+    """Headline = real data first (top-view images of KITTI, then KITTI scans, then the synthetic
+    default), the revisit protocol before the paper's, lowest sequence, newest version."""
+    kinds = ("bev", "kitti", "synth")
+    kind = kinds.index(key.source_kind) if key.source_kind in kinds else len(kinds)
+    return (kind, key.protocol != "revisit", key.source_label, key.sequence, -key.task_version)
+
+
+def _offer_headline(report: BuildReport, table: Table, robust: list[Table],
+                    records: list[ResultRecord]) -> None:
+    """Make `table` the headline if it ranks before the current one."""
+    if report.headline is None or headline_rank(table.key) < headline_rank(report.headline.key):
+        report.headline = table
+        report.headline_robust = robust
+        report.headline_records = records
 
 
 def _index(
@@ -226,6 +310,7 @@ def _index(
     skipped_base: str | os.PathLike[str] | None,
     figures: bool,
     robust: Sequence[Table] = (),
+    headline_records: Sequence[ResultRecord] = (),
 ) -> str:
     lines = [
         "# safl-bench leaderboard",
@@ -239,18 +324,10 @@ def _index(
         "",
     ]
     if headline is not None:
-        lines += ["## Headline", "", headline.markdown(level=3), ""]
-        if robust:
-            lines += [
-                "Recall at 100 % precision is 0 as soon as one wrong match is more confident "
-                "than every correct one; the measures below do not collapse on one false positive "
-                "(F1max and Recall@1: how many queries are matched correctly; AUC: how well the "
-                "confidence orders correct before wrong matches). `safl-bench explain --method M "
-                "--task ID` draws which false positives set a zero.",
-                "",
-            ]
-            for table in robust:
-                lines += [table.markdown(level=3), ""]
+        lines += ["## Headline", "", facts_markdown(headline, headline_records), "",
+                  READING, "", headline.markdown(level=3), ""]
+        for table in robust:
+            lines += [table.markdown(level=3), ""]
     current_source = None
     for entry in entries:
         key = entry.key
