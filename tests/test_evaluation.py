@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_evaluation_values import MatrixMethod  # one stand-in method for both files
 
 from safl_bench.evaluation import EvaluationConfig, evaluate_method, match_outcomes, score_matches
 from safl_bench.groundtruth import GroundTruth
@@ -65,23 +66,6 @@ def test_the_positives_are_the_same_whatever_the_wrong_answers() -> None:
     assert band.n_positive == far.n_positive == 3
     assert band.recall_at_1 == far.recall_at_1
     assert band.recall_at_100 == pytest.approx(2 / 3) == far.recall_at_100
-
-
-class MatrixMethod:
-    """A method whose descriptors are frame numbers and whose distance is a given matrix."""
-
-    name = "matrix"
-    input_kind = "topview"
-    cache_descriptors = False
-
-    def __init__(self, D: np.ndarray) -> None:
-        self.D = D
-
-    def describe(self, views: np.ndarray) -> np.ndarray:
-        return np.asarray(views, dtype=np.float64)[:, None]
-
-    def distance(self, q: np.ndarray, db: np.ndarray) -> np.ndarray:
-        return self.D[np.ix_(q[:, 0].astype(int), db[:, 0].astype(int))]
 
 
 def paper_truth(n: int, spacing: float) -> GroundTruth:
