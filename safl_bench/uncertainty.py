@@ -94,9 +94,12 @@ def weighted_measures(o: Outcomes, w: np.ndarray) -> dict[str, np.ndarray]:
         f1c = np.where(has, 2 * tp / (decided + n_correct[:, None]), 0).max(axis=1, initial=0)
         out["f1_max"] = f1
         out["f1_max_of_correct"] = np.where(n_correct > 0, f1c, 0.0)
-        first = np.argmax(has, axis=1)  # the most confident threshold drawn
+        first = np.argmax(has, axis=1) if has.shape[1] else np.zeros(len(w), np.int64)
         rows = np.arange(len(w))
-        p_r0 = np.where(has.any(axis=1), tp[rows, first] / np.maximum(decided[rows, first], 1), 0.0)
+        if has.shape[1]:  # precision at the most confident threshold drawn
+            p_r0 = np.where(has.any(axis=1), tp[rows, first] / np.maximum(decided[rows, first], 1), 0.0)
+        else:  # no match reported at all
+            p_r0 = np.zeros(len(w))
         out["extended_precision"] = (p_r0 + out["recall_at_100_precision"]) / 2
         out["extended_precision_of_correct"] = (p_r0 + out["recall_at_100_precision_of_correct"]) / 2
 

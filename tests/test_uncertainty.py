@@ -126,3 +126,10 @@ def test_compare_prints_paired_differences_and_a_verdict(tmp_path, capsys) -> No
     assert "seeds 0, 1" in out and "A - B" in out
     assert "verdict: A better on" in out and "recall_at_1" in out.split("verdict:")[1]
     assert main(["compare", "--method", "good", "--results", str(tmp_path)]) == 2
+
+
+def test_a_method_that_reports_no_match_has_zero_measures_and_an_interval() -> None:
+    o = metrics.outcomes([-np.inf] * 20, [False] * 20, [True] * 20)
+    cell = uncertainty.bootstrap([o], replicates=50)
+    assert cell["recall_at_1"].mean == 0.0 and cell["f1_max"].high == 0.0
+    assert np.isnan(cell["auc"].mean)  # one class only, as the metrics say (None)
