@@ -330,9 +330,11 @@ class OutdatedRecordError(DataError):
 
 def rerun_command(record: ResultRecord) -> str:
     """The command that recomputes `record` with this code."""
-    root = {"kitti": " --kitti-root DIR", "bev": " --bev-root DIR"}.get(record.task.source_kind, "")
+    from safl_bench.sources import ROOT_OPTION
+
+    root = ROOT_OPTION.get(record.task.source_kind)
     return (f"safl-bench run --method {record.method.name}@{record.method.version} "
-            f"--task {record.task.id} --seed {record.seed}{root} --force")
+            f"--task {record.task.id} --seed {record.seed}{f' {root}' if root else ''} --force")
 
 
 def unchanged_by_version_2(record: ResultRecord) -> bool:

@@ -45,6 +45,7 @@ from safl_bench.records import (
     write_evaluated,
     write_record,
 )
+from safl_bench.sources import ROOT_OPTION
 from safl_bench.tasks import registry, spec, suite
 from safl_bench.tasks.registry import runnable_spec
 from safl_bench.tasks.spec import TaskSpec
@@ -525,8 +526,8 @@ def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
     if not cells:
         return ""
     first = cells[0]
-    root = {"kitti": " --kitti-root DIR", "bev": " --bev-root DIR"}.get(
-        first.record.task.source_kind if first.record is not None else "", "")
+    option = ROOT_OPTION.get(first.record.task.source_kind) if first.record is not None else None
+    root = f" {option}" if option else ""
     return (f"note: recall at 100 % precision is 0.0 in {len(cells)} cell(s) whose matches are mostly "
             "correct (R@1 >= 50 %): the most confident wrong match comes before any correct one; "
             f"see which with `safl-bench explain --method {first.method} --task {first.task_id}{root}`")

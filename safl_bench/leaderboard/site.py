@@ -38,6 +38,7 @@ from safl_bench.leaderboard.grouping import TableKey, slugify
 from safl_bench.leaderboard.headline import READING, facts
 from safl_bench.leaderboard.tables import MISSING, RowKey, Table, ValueFormat
 from safl_bench.records import Problem, ResultRecord, record_path
+from safl_bench.sources import ROOT_OPTION
 
 SITE_DIR = "site"
 INDEX = "index.html"
@@ -283,10 +284,8 @@ def explain_command(record: ResultRecord, records_folder: str) -> str:
     """The `safl-bench explain` command that draws `record`'s cell."""
     parts = ["safl-bench explain", f"--method {record.method.name}", f"--task {record.task.id}",
              f"--seed {record.seed}", f"--results {records_folder}"]
-    if record.task.source_kind == "bev":
-        parts.append("--bev-root DIR")
-    elif record.task.source_kind == "kitti":
-        parts.append("--kitti-root DIR")
+    if record.task.source_kind in ROOT_OPTION:
+        parts.append(ROOT_OPTION[record.task.source_kind])
     return " ".join(parts)
 
 
