@@ -29,6 +29,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from safl_bench.errors import DataError
@@ -56,77 +57,140 @@ def block_weights(n: int, replicates: int, rng: np.random.Generator, block: int 
     if n <= 0:
         raise DataError("cannot resample an empty set of queries")
     block = max(1, min(block, n))
-    n_blocks = -(-n // block)
-    starts = rng.integers(0, n, (replicates, n_blocks))
-    idx = (starts[:, :, None] + np.arange(block)[None, None, :]).reshape(replicates, -1)[:, :n] % n
-    flat = idx + (np.arange(replicates) * n)[:, None]
-    return np.bincount(flat.ravel(), minlength=replicates * n).reshape(replicates, n)
+    starts = rng.integers(0, n, (replicates, -(-n // block)))
+    return _count_blocks(starts, n, block)
+
+
+@numba.njit(cache=True)
+def _count_blocks(starts: np.ndarray, n: int, block: int) -> np.ndarray:  # pragma: no cover - compiled
+    """Counts of the queries that blocks starting at `starts` (R, B) draw, the first n per row."""
+    out = np.zeros((starts.shape[0], n), dtype=np.int64)
+    for r in range(starts.shape[0]):
+        drawn = 0
+        for b in range(starts.shape[1]):
+            for k in range(block):
+                if drawn == n:
+                    break
+                out[r, (starts[r, b] + k) % n] += 1
+                drawn += 1
+    return out
+
+
+#: The measures `_kernel` writes, in its output's column order.
+_KERNEL_MEASURES = ("recall_at_1", "recall_at_100_precision", "recall_at_100_precision_of_correct",
+                    "f1_max", "f1_max_of_correct", "extended_precision",
+                    "extended_precision_of_correct", "auc")
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _kernel(w: np.ndarray, has_true: np.ndarray, correct: np.ndarray, wrong: np.ndarray,
+            desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray, asc_end: np.ndarray,
+            neg: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """(R, 8): `_KERNEL_MEASURES` for every row of weights `w` (R, N), one pass over the
+    queries per replicate. `desc`: the claimed queries, most confident first; `desc_end[g]`:
+    whether position g ends a run of equal confidence (a threshold). `asc`: all queries by
+    rising key (unanswered lowest), `asc_end` likewise; `neg`: wrong or unanswered."""
+    n_rep = w.shape[0]
+    out = np.empty((n_rep, 8))
+    for r in range(n_rep):
+        pos = 0.0
+        n_correct = 0.0
+        for i in range(w.shape[1]):
+            if has_true[i]:
+                pos += w[r, i]
+            if correct[i]:
+                n_correct += w[r, i]
+        tp = 0.0
+        fp = 0.0
+        r100 = 0.0
+        f1 = 0.0
+        f1c = 0.0
+        p_r0 = 0.0
+        seen = False
+        for g in range(desc.shape[0]):
+            i = desc[g]
+            if correct[i]:
+                tp += w[r, i]
+            elif wrong[i]:
+                fp += w[r, i]
+            if not desc_end[g]:
+                continue
+            decided = tp + fp
+            if decided <= 0:
+                continue
+            if not seen:  # precision at the most confident threshold drawn
+                p_r0 = tp / decided
+                seen = True
+            if fp == 0 and tp > r100:
+                r100 = tp
+            f1 = max(f1, 2 * tp / (decided + pos))
+            f1c = max(f1c, 2 * tp / (decided + n_correct))
+        # ROC AUC: correct against wrong and unanswered, ties counted half
+        below = 0.0  # negatives' weight in the groups before this one
+        auc_num = 0.0
+        pos_w = 0.0
+        g0 = 0
+        for g in range(asc.shape[0]):
+            if not asc_end[g]:
+                continue
+            within = 0.0
+            pos_g = 0.0
+            for h in range(g0, g + 1):
+                i = asc[h]
+                if neg[i]:
+                    within += w[r, i]
+                elif correct[i]:
+                    pos_g += w[r, i]
+            auc_num += pos_g * (below + 0.5 * within)
+            pos_w += pos_g
+            below += within
+            g0 = g + 1
+        denom = pos_w * below
+        nan = np.nan
+        r_at_100 = r100 / pos if pos > 0 else nan
+        r_of_correct = r100 / n_correct if n_correct > 0 else 0.0
+        out[r, 0] = n_correct / pos if pos > 0 else nan
+        out[r, 1] = r_at_100
+        out[r, 2] = r_of_correct if pos > 0 else nan
+        out[r, 3] = f1 if pos > 0 else nan
+        out[r, 4] = (f1c if n_correct > 0 else 0.0) if pos > 0 else nan
+        out[r, 5] = (p_r0 + r_at_100) / 2
+        out[r, 6] = (p_r0 + r_of_correct) / 2 if pos > 0 else nan
+        out[r, 7] = auc_num / denom if denom > 0 else nan
+    return out
+
+
+def _run_ends(sorted_keys: np.ndarray) -> np.ndarray:
+    """Whether each position of sorted keys is the last of its run of equal keys."""
+    return np.r_[sorted_keys[1:] != sorted_keys[:-1], True] if len(sorted_keys) else np.zeros(0, bool)
 
 
 def weighted_measures(o: Outcomes, w: np.ndarray) -> dict[str, np.ndarray]:
     """Each measure of `measure_names` for every row of query weights `w` (R, N): the
     definitions of `safl_bench.metrics` with query i counted w[r, i] times. NaN where a measure
-    is undefined for a replicate (no positive drawn; AUC with one class)."""
+    is undefined for a replicate (no positive drawn; AUC with one class). Compiled (`_kernel`,
+    one pass over the queries per replicate), so a thousand replicates cost milliseconds."""
     scored = o.has_candidate
     conf, label = o.confidence[scored], o.label[scored]
     has_true = o.has_true_place[scored]
-    w = np.asarray(w, dtype=np.float64)[:, scored]
+    w = np.ascontiguousarray(np.asarray(w, dtype=np.float64)[:, scored])
     claimed = np.isfinite(conf)
     correct = claimed & (label == CORRECT)
     wrong = claimed & (label != CORRECT) & (label != AMBIGUOUS)
-    pos = w @ has_true.astype(np.float64)
-    n_correct = w @ correct.astype(np.float64)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out: dict[str, np.ndarray] = {"recall_at_1": n_correct / pos}
-
-        # thresholds: the distinct confidences of the claimed queries, most confident first
-        order = np.flatnonzero(claimed)[np.argsort(-conf[claimed], kind="stable")]
-        c_sorted = conf[order]
-        ends = np.r_[np.flatnonzero(np.diff(c_sorted) != 0), len(order) - 1] if len(order) else []
-        tp = np.cumsum(w[:, order] * correct[order], axis=1)[:, ends]
-        fp = np.cumsum(w[:, order] * wrong[order], axis=1)[:, ends]
-        decided = tp + fp
-        has = decided > 0  # a threshold of this replicate (some decided match drawn above it)
-        r100 = np.where(has & (fp == 0), tp, 0).max(axis=1, initial=0)
-        out["recall_at_100_precision"] = r100 / pos
-        out["recall_at_100_precision_of_correct"] = np.where(n_correct > 0, r100 / n_correct, 0.0)
-        f1 = np.where(has, 2 * tp / (decided + pos[:, None]), 0).max(axis=1, initial=0)
-        f1c = np.where(has, 2 * tp / (decided + n_correct[:, None]), 0).max(axis=1, initial=0)
-        out["f1_max"] = f1
-        out["f1_max_of_correct"] = np.where(n_correct > 0, f1c, 0.0)
-        first = np.argmax(has, axis=1) if has.shape[1] else np.zeros(len(w), np.int64)
-        rows = np.arange(len(w))
-        if has.shape[1]:  # precision at the most confident threshold drawn
-            p_r0 = np.where(has.any(axis=1), tp[rows, first] / np.maximum(decided[rows, first], 1), 0.0)
-        else:  # no match reported at all
-            p_r0 = np.zeros(len(w))
-        out["extended_precision"] = (p_r0 + out["recall_at_100_precision"]) / 2
-        out["extended_precision_of_correct"] = (p_r0 + out["recall_at_100_precision_of_correct"]) / 2
-
-        # ROC AUC: correct against wrong and unanswered (ranked lowest), ties counted half
-        neg = wrong | ~claimed
-        key = np.where(claimed, conf, -np.inf)
-        asc = np.argsort(key, kind="stable")
-        k_sorted = key[asc]
-        start = np.r_[0, np.flatnonzero(np.diff(k_sorted) != 0) + 1]  # first of each group
-        group = np.cumsum(np.r_[0, np.diff(k_sorted) != 0])  # group of each sorted query
-        wn = np.cumsum(w[:, asc] * neg[asc], axis=1)
-        before = np.where(start > 0, wn[:, np.maximum(start - 1, 0)], 0.0)  # (R, groups)
-        ends_g = np.r_[start[1:] - 1, len(asc) - 1]
-        within = wn[:, ends_g] - before
-        wp = w[:, asc] * correct[asc]
-        auc_num = (wp * (before[:, group] + 0.5 * within[:, group])).sum(axis=1)
-        denom = wp.sum(axis=1) * wn[:, -1]
-        out["auc"] = np.where(denom > 0, auc_num / np.where(denom > 0, denom, 1), np.nan)
-
-        if o.true_rank is not None:
-            rank = o.true_rank[scored]
+    # thresholds: the distinct confidences of the claimed queries, most confident first
+    desc = np.flatnonzero(claimed)[np.argsort(-conf[claimed], kind="stable")]
+    key = np.where(claimed, conf, -np.inf)
+    asc = np.argsort(key, kind="stable")
+    values = _kernel(w, has_true, correct, wrong, desc, _run_ends(conf[desc]), asc,
+                     _run_ends(key[asc]), wrong | ~claimed)
+    out = {name: values[:, j] for j, name in enumerate(_KERNEL_MEASURES)}
+    if o.true_rank is not None:
+        rank = o.true_rank[scored]
+        pos = w @ has_true.astype(np.float64)
+        with np.errstate(invalid="ignore", divide="ignore"):
             for n in (5, 10):
-                out[f"recall_at_{n}"] = (w @ (has_true & (rank >= 1) & (rank <= n)).astype(float)) / pos
-        bad = pos <= 0
-        for name in out:
-            if name != "auc":
-                out[name] = np.where(bad, np.nan, out[name])
+                hits = w @ (has_true & (rank >= 1) & (rank <= n)).astype(np.float64)
+                out[f"recall_at_{n}"] = np.where(pos > 0, hits / np.where(pos > 0, pos, 1), np.nan)
     return out
 
 
