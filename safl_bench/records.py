@@ -328,6 +328,19 @@ class OutdatedRecordError(DataError):
     to rescore it from."""
 
 
+def seed_outcomes(records: Sequence[ResultRecord], mode: str) -> list[Outcomes] | None:
+    """Each record's per-query outcomes in matching mode `mode` (the records: the seeds of one
+    cell), for intervals and paired comparisons (`safl_bench.uncertainty`); None when a record
+    holds none (metrics version 1) or lacks the mode."""
+    out = []
+    for record in records:
+        result = record.results.get(mode)
+        if result is None or result.queries is None:
+            return None
+        out.append(result.queries.outcomes())
+    return out
+
+
 def rerun_command(record: ResultRecord) -> str:
     """The command that recomputes `record` with this code."""
     from safl_bench.sources import ROOT_OPTION

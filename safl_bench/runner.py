@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method, same_settings
 from safl_bench.method import Method, input_note, method_input
@@ -325,8 +327,21 @@ def run_cells(
     log: Callable[[str], None] | None = None,
     parallel: Parallel | None = None,
 ) -> list[CellOutcome]:
-    """Run one method on every task with `options.seed` (see `run_grid`)."""
+    """Run one method on every task: at `options.seed`, or at each task's seeds (`run_grid`)."""
     return run_grid([method], task_ids, options, log=log, parallel=parallel)
+
+
+def cell_seeds(task: TaskSpec, seeds: Sequence[int] | None = None,
+               n_seeds: int | None = None) -> tuple[int, ...]:
+    """The noise seeds to run of `task`: `seeds` when given (every task), else its first
+    `n_seeds` (tasks whose queries are random; a task where nothing is random has one seed),
+    else all the seeds it declares (`TaskSpec.seeds`)."""
+    if seeds is not None:
+        return tuple(seeds)
+    declared = task.seeds
+    if n_seeds is None or len(declared) == 1:
+        return declared
+    return tuple(range(task.seed, task.seed + n_seeds))
 
 
 def run_grid(
@@ -334,13 +349,14 @@ def run_grid(
     task_ids: Sequence[str],
     options: RunOptions,
     *,
-    seeds: Sequence[int | None] | None = None,
+    seeds: Sequence[int] | None = None,
+    n_seeds: int | None = None,
     log: Callable[[str], None] | None = None,
     parallel: Parallel | None = None,
 ) -> list[CellOutcome]:
-    """Run every (method, seed, task) cell, in that order (`seeds`: default `[options.seed]`,
-    None meaning each task's registered seed); a cell that fails (bad data, a dead worker) is
-    reported and the others go on.
+    """Run every (method, seed, task) cell, in that order; a cell that fails (bad data, a dead
+    worker) is reported and the others go on. The seeds of a task: `seeds`, else
+    `options.seed`, else its declared ones (`cell_seeds`, `n_seeds` of them when given).
 
     Serially (the default) each cell is evaluated, timed and written in turn. With `parallel`
     (local workers or Ray) all the cells of the grid are queued at once and evaluated on the
@@ -361,11 +377,16 @@ def run_grid(
     if len(set(versions)) < len(versions):
         raise ConfigError(f"one grid cannot hold one method twice ({', '.join(versions)}): their "
                           "records would share a path; run them into separate --results")
+    if seeds is None and options.seed is not None:
+        seeds = [options.seed]
+    per_task = {t: cell_seeds(spec(t), seeds, n_seeds) for t in task_ids}
+    depth = max((len(v) for v in per_task.values()), default=0)
     cells = [
-        (method, task_id, dataclasses.replace(options, seed=seed))
+        (method, task_id, dataclasses.replace(options, seed=per_task[task_id][j]))
         for method in methods
-        for seed in dict.fromkeys([options.seed] if seeds is None else seeds)
+        for j in range(depth)
         for task_id in task_ids
+        if j < len(per_task[task_id])
     ]
 
     def failed(i: int, message: str) -> CellOutcome:
@@ -373,7 +394,7 @@ def run_grid(
         seed = _seed(spec(task_id), opts)
         path = record_path(opts.results_dir, method.name, method.version, task_id, seed)
         label = task_id if len(methods) == 1 else f"{method.name} on {task_id}"
-        say(f"error: {label}{'' if opts.seed is None else f' (seed {seed})'}: {message}")
+        say(f"error: {label} (seed {seed}): {message}")
         return CellOutcome(task_id, seed, "failed", path, message=message, method=method.name)
 
     outcomes: dict[int, CellOutcome] = {}
@@ -470,50 +491,96 @@ def _prepare_views(
     return tasks
 
 
-def _pct(value: float | None) -> str:
-    return "—" if value is None else f"{100 * value:.1f}"
+def _cells(outcomes: Sequence[CellOutcome]) -> list[tuple[str, str, list[CellOutcome]]]:
+    """(method, task, its seeds' outcomes that have a record), in the order cells first appear."""
+    cells: dict[tuple[str, str], list[CellOutcome]] = {}
+    for o in outcomes:
+        if o.record is not None:
+            cells.setdefault((o.method, o.task_id), []).append(o)
+    return [(m, t, sorted(v, key=lambda o: o.seed)) for (m, t), v in cells.items()]
 
 
 def summary_table(outcomes: Sequence[CellOutcome]) -> str:
-    """A plain-text table of the headline figures per cell: the matcher preset, then recall at
-    100 % precision beside the measures that do not collapse on one confident false positive
-    (F1max, Recall@1, AUC) of the sequence matcher, then single-frame matching; a method and a
-    seed column only when the cells have more than one of them."""
+    """A plain-text table of the headline figures per (method, task) cell over its seeds: the
+    matcher preset, then recall at 100 % precision beside the measures that do not collapse on
+    one confident false positive (F1max, Recall@1, AUC) of the sequence matcher, then
+    single-frame matching, each as its mean over the seeds and 95 % interval over seeds and
+    queries (`safl_bench.uncertainty`); ms/frame as the median over the seeds' records and
+    their range. A method column only when there are several; a failed seed gets its own row."""
     from safl_bench.matcher_presets import label
+    from safl_bench.records import seed_outcomes
+    from safl_bench.uncertainty import bootstrap
 
     by_method = len({o.method for o in outcomes}) > 1
-    by_seed = len({o.seed for o in outcomes}) > 1
-    lead = (("method",) if by_method else ()) + ("task",) + (("seed",) if by_seed else ())
-    header = (*lead, "matcher", "R@100%P", "F1max", "R@1", "AUC", "R@100%P 1-frame",
-              "R@1 1-frame", "ms/frame", "record")
+    lead = ("method",) if by_method else ()
+    header = (*lead, "task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC",
+              "R@100%P 1-frame", "R@1 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
-    for o in outcomes:
-        key = ((o.method,) if by_method else ()) + (o.task_id,) + ((str(o.seed),) if by_seed else ())
-        if o.record is None:
-            rows.append((*key, *["—"] * (len(header) - len(key) - 1), f"failed: {o.message}"))
-            continue
-        seq = o.record.results["sequence"].metrics
-        single = o.record.results["single_frame"].metrics
+    no_interval = False
+    for method, task_id, cell in _cells(outcomes):
+        records = [o.record for o in cell if o.record is not None]
+        first = records[0]
+        shown: dict[str, dict[str, str]] = {}
+        for mode in ("sequence", "single_frame"):
+            per_seed = seed_outcomes(records, mode)
+            if per_seed is None:  # records of metrics version 1: their means only
+                no_interval = True
+                shown[mode] = _means_only([r.results[mode].metrics for r in records])
+            else:
+                iv = bootstrap(per_seed)
+                shown[mode] = {"recall_at_100_precision": iv["recall_at_100_precision"].format(100),
+                               "f1_max": iv["f1_max"].format(1, 3),
+                               "recall_at_1": iv["recall_at_1"].format(100),
+                               "auc": iv["auc"].format(1, 3)}
+        ms = sorted(r.timings.describe_ms_per_frame for r in records)
+        timing = f"{float(np.median(ms)):.2f}" + (f" [{ms[0]:.2f}, {ms[-1]:.2f}]" if len(ms) > 1 else "")
+        statuses = [o.status for o in cell]
+        status = ", ".join(f"{s} {statuses.count(s)}" if len(statuses) > 1 else s
+                           for s in dict.fromkeys(statuses))
+        seq, single = shown["sequence"], shown["single_frame"]
         rows.append((
-            *key,
-            label(o.record.matcher),
-            _pct(seq.recall_at_100_precision),
-            "—" if seq.f1_max is None else f"{seq.f1_max:.3f}",
-            _pct(seq.recall_at_1),
-            "—" if seq.auc is None else f"{seq.auc:.3f}",
-            _pct(single.recall_at_100_precision),
-            _pct(single.recall_at_1),
-            f"{o.record.timings.describe_ms_per_frame:.2f}",
-            o.status,
+            *((method,) if by_method else ()), task_id, format_seed_list([o.seed for o in cell]),
+            label(first.matcher), seq["recall_at_100_precision"], seq["f1_max"],
+            seq["recall_at_1"], seq["auc"], single["recall_at_100_precision"],
+            single["recall_at_1"], timing, status,
         ))
+    for o in outcomes:
+        if o.record is None:
+            key = ((o.method,) if by_method else ()) + (o.task_id, str(o.seed))
+            rows.append((*key, *["—"] * (len(header) - len(key) - 1), f"failed: {o.message}"))
     widths = [max(len(r[i]) for r in (header, *rows)) for i in range(len(header))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
              for r in (header, *rows)]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    legend = (f"R@100%P, F1max, R@1: recall over the queries with a true place (metrics version "
-              f"{METRICS_VERSION}; recall over correct matches is in the records)")
+    legend = (f"mean over the seeds [95 % interval over seeds and queries, block bootstrap]; "
+              f"R@100%P, F1max, R@1: recall over the queries with a true place (metrics version "
+              f"{METRICS_VERSION}; recall over correct matches is in the records); ms/frame: "
+              "median over the seeds' records [their range]")
+    extra = ["note: some records hold no per-query outcomes (metrics version 1): their cells show "
+             "the mean only; `safl-bench run --force` recomputes them"] if no_interval else []
     note = zeros_note(outcomes)
-    return "\n".join([*lines, legend] + ([note] if note else []))
+    return "\n".join([*lines, legend, *extra] + ([note] if note else []))
+
+
+def _means_only(metrics: Sequence[Any]) -> dict[str, str]:
+    """The means over seeds of the run table's measures, for records without per-query outcomes."""
+    def mean(name: str, scale: float, decimals: int) -> str:
+        values = [getattr(m, name) for m in metrics]
+        if any(v is None for v in values):
+            return "—"
+        return f"{scale * float(np.mean(values)):.{decimals}f}"
+
+    return {"recall_at_100_precision": mean("recall_at_100_precision", 100, 1),
+            "f1_max": mean("f1_max", 1, 3), "recall_at_1": mean("recall_at_1", 100, 1),
+            "auc": mean("auc", 1, 3)}
+
+
+def format_seed_list(seeds: Sequence[int]) -> str:
+    """'0-4' for a run of consecutive seeds, else '0,3,7'."""
+    ordered = sorted(seeds)
+    if len(ordered) > 2 and ordered == list(range(ordered[0], ordered[-1] + 1)):
+        return f"{ordered[0]}-{ordered[-1]}"
+    return ",".join(map(str, ordered))
 
 
 def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
@@ -528,6 +595,6 @@ def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
     first = cells[0]
     option = ROOT_OPTION.get(first.record.task.source_kind) if first.record is not None else None
     root = f" {option}" if option else ""
-    return (f"note: recall at 100 % precision is 0.0 in {len(cells)} cell(s) whose matches are mostly "
+    return (f"note: recall at 100 % precision is 0.0 in {len(cells)} record(s) whose matches are mostly "
             "correct (R@1 >= 50 %): the most confident wrong match comes before any correct one; "
             f"see which with `safl-bench explain --method {first.method} --task {first.task_id}{root}`")

@@ -207,6 +207,16 @@ class Interval:
     def excludes_zero(self) -> bool:
         return self.low > 0 or self.high < 0
 
+    def format(self, scale: float = 1.0, decimals: int = 1) -> str:
+        """'mean [low, high]' (values times `scale`); 'mean [n/a]' when the interval is
+        undefined (a measure NaN in every replicate), 'n/a' when the mean is too."""
+        if self.mean != self.mean:
+            return "n/a"
+        mean = f"{self.mean * scale:.{decimals}f}"
+        if self.low != self.low:
+            return f"{mean} [n/a]"
+        return f"{mean} [{self.low * scale:.{decimals}f}, {self.high * scale:.{decimals}f}]"
+
 
 def _draws(n_seeds: int, rng: np.random.Generator, replicates: int) -> np.ndarray:
     """(replicates, k): the seeds each replicate draws (k = n_seeds; just seed 0 when one)."""

@@ -23,7 +23,7 @@ def register_tiny(ids: tuple[str, ...]) -> Iterator[tuple[str, ...]]:
     """Register paper tasks on the tiny KITTI fixture (condition from the id), yield, unregister."""
     for task_id in ids:
         tasks.register(task_id, source="kitti", sequence="00", condition=task_id.split("-")[1],
-                       step=1, map_config=MapConfig(size=32))
+                       step=1, map_config=MapConfig(size=32), n_seeds=1)
     yield ids
     for task_id in ids:
         tasks.unregister(task_id)
@@ -176,7 +176,7 @@ def test_a_sequence_whose_views_cannot_be_rendered_fails_only_its_cells(kitti_co
     (kitti_copy / "sequences" / "01" / "velodyne" / "000005.bin").write_bytes(b"\0" * 10)
     ids = ("Test/TinyBroken00-T1R1-v0", "Test/TinyBroken01-T1R1-v0")
     for task_id, sequence in zip(ids, ("00", "01"), strict=True):
-        tasks.register(task_id, source="kitti", sequence=sequence, condition="T1R1", step=1,
+        tasks.register(task_id, source="kitti", sequence=sequence, condition="T1R1", step=1, n_seeds=1,
                        map_config=MapConfig(size=32))
     try:
         out = runner.run_cells(make_method("sad"), ids, options(kitti_copy, tmp_path))
@@ -200,9 +200,9 @@ def test_summary_names_the_preset_and_explains_zeros_of_mostly_correct_cells(tmp
     fine = replace(make_record("sad", condition="T5R1", recall=0.5, recall_at_1=0.9), matcher=paper)
     outcomes = [runner.CellOutcome(r.task.id, 0, "computed", tmp_path, r, method="sad") for r in (zero, fine)]
     lines = runner.summary_table(outcomes).splitlines()
-    assert lines[0].split()[:6] == ["task", "matcher", "R@100%P", "F1max", "R@1", "AUC"]
-    assert lines[2].split()[:5] == [zero.task.id, "paper", "0.0", "0.700", "90.0"]
-    assert lines[-1].startswith("note: recall at 100 % precision is 0.0 in 1 cell(s) whose matches")
+    assert lines[0].split()[:7] == ["task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC"]
+    assert lines[2].split()[:3] == [zero.task.id, "0", "paper"]
+    assert lines[-1].startswith("note: recall at 100 % precision is 0.0 in 1 record(s) whose matches")
     assert f"safl-bench explain --method sad --task {zero.task.id} --bev-root DIR" in lines[-1]
     assert runner.zeros_note(outcomes[1:]) == ""
 

@@ -259,7 +259,8 @@ def test_an_old_synthetic_task_cannot_be_run(
     with pytest.warns(UserWarning, match="superseded"):  # the failed cells' seeds are looked up
         outcomes = runner.run_grid([make_method("sad")], ["SAFL/Synth00-T1R1-v0", "SAFL/Synth00-T1R1-v1"],
                                    options, log=lambda _msg: None)
-    assert len(outcomes) == 2
+    assert [(o.task_id, o.seed) for o in outcomes] == [  # each of the tasks' five seeds fails
+        (t, seed) for seed in range(5) for t in ("SAFL/Synth00-T1R1-v0", "SAFL/Synth00-T1R1-v1")]
     for outcome in outcomes:
         assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v4" in outcome.message
     assert not any(tmp_path.iterdir())  # nothing made, nothing written

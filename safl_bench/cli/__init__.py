@@ -13,7 +13,7 @@ import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
-from typing import Any
+from typing import Any, NoReturn
 
 from safl_bench.errors import SaflError
 
@@ -74,12 +74,20 @@ def _add(sub: Any, name: str, command: Command, selected: bool) -> None:
     p.set_defaults(_handler=module.main)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose usage errors are one line (what is wrong and where the help is),
+    exit 2, instead of the whole usage text before the message."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser; only the subcommand named in `argv` is imported (all if None)."""
     from safl_bench import __version__
 
     words = _selected(argv) if argv is not None else None
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="safl-bench",
         description="Benchmark LiDAR loop-closure-detection descriptors (Stable-AFL and others).",
     )

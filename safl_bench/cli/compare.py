@@ -16,7 +16,7 @@ from pathlib import Path
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.metrics import Outcomes
 from safl_bench.records import MODES, ResultRecord, default_results_dir, load_records
-from safl_bench.uncertainty import Interval, bootstrap, measure_names, paired_difference
+from safl_bench.uncertainty import bootstrap, measure_names, paired_difference
 
 HELP = ("compare two methods task by task: means with 95 % intervals over seeds and queries, "
         "the paired difference and a verdict")
@@ -58,12 +58,6 @@ def _pick(records: list[ResultRecord], text: str) -> dict[str, dict[int, ResultR
     if not out:
         raise DataError(f"no records of {name}@{version}")
     return out
-
-
-def _fmt(iv: Interval, scale: float) -> str:
-    if iv.low != iv.low:  # NaN: undefined
-        return f"{iv.mean * scale:.1f} [n/a]" if iv.mean == iv.mean else "n/a"
-    return f"{iv.mean * scale:.1f} [{iv.low * scale:.1f}, {iv.high * scale:.1f}]"
 
 
 def main(args: argparse.Namespace) -> int:
@@ -115,7 +109,7 @@ def main(args: argparse.Namespace) -> int:
         for name in measures:
             if name not in diff:
                 continue
-            rows.append((name, _fmt(ia[name], 100), _fmt(ib[name], 100), _fmt(diff[name], 100)))
+            rows.append((name, ia[name].format(100), ib[name].format(100), diff[name].format(100)))
             d = diff[name]
             (wins if d.excludes_zero() and d.mean > 0 else
              losses if d.excludes_zero() and d.mean < 0 else ties).append(name)

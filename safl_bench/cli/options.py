@@ -36,6 +36,19 @@ def seed(text: str) -> int:
     return value
 
 
+def seed_count(text: str) -> int:
+    """argparse type of a number of seeds: an integer >= 1."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number of seeds is an integer >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"a number of seeds is an integer >= 1, got {value}")
+    return value
+
+
 def add_parallel_arguments(parser: Any, what: str) -> None:
     """--workers N and --ray ADDRESS (see `safl_bench.parallel`)."""
     parser.add_argument("--workers", type=int, default=1, metavar="N",

@@ -13,6 +13,7 @@ from safl_bench.cli.options import (
     parallel_from,
     parse_key_values,
     seed,
+    seed_count,
     source_kind,
 )
 
@@ -34,8 +35,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
     add_bev_arguments(parser)
-    parser.add_argument("--seed", type=seed, action="append",
-                        help="seed of the query noise (default: the task's own); repeatable")
+    seeds = parser.add_mutually_exclusive_group()
+    seeds.add_argument("--seeds", type=seed_count, metavar="N",
+                       help="run the first N noise seeds of each task whose queries are random "
+                            "(default: all the seeds the task declares, five; a task where nothing "
+                            "is random has one)")
+    seeds.add_argument("--seed", type=seed, action="append", metavar="S",
+                       help="run exactly this noise seed on every task; repeatable")
     parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")
     parser.add_argument("--force", action="store_true", help="recompute cells whose record exists")
     parser.add_argument(
@@ -79,6 +85,18 @@ def matcher_config(score: str | None, items: list[str], preset: str = "paper") -
     return matcher_presets.configure(preset, changes, flag="--matcher")
 
 
+def distinct_seeds(seeds: list[int]) -> list[int]:
+    """`--seed` values in order; one given twice is a ConfigError naming it (it would run one
+    cell twice and weigh it twice in a mean)."""
+    from safl_bench.errors import ConfigError
+
+    repeated = sorted({s for s in seeds if seeds.count(s) > 1})
+    if repeated:
+        raise ConfigError(f"--seed {', '.join(map(str, repeated))} given more than once; give "
+                          "each seed once")
+    return seeds
+
+
 def main(args: argparse.Namespace) -> int:
     from safl_bench.errors import ConfigError
     from safl_bench.method_registry import make_method, method_class
@@ -98,10 +116,9 @@ def main(args: argparse.Namespace) -> int:
     by_source: dict[str, list[str]] = {}
     for task_id in task_ids:
         by_source.setdefault(spec(task_id).source, []).append(task_id)
-    seeds = list(dict.fromkeys(args.seed)) if args.seed else [None]
+    seeds = distinct_seeds(args.seed) if args.seed else None
     options = RunOptions(
         results_dir=Path(args.results) if args.results else default_results_dir(),
-        seed=seeds[0],
         force=args.force,
         kitti_root=args.kitti_root,
         bev_root=args.bev_root,
@@ -113,7 +130,8 @@ def main(args: argparse.Namespace) -> int:
     outcomes = []
     for source, ids in by_source.items():
         methods = [make_method(name, weights=args.weights, source=source, **params) for name in names]
-        outcomes += run_grid(methods, ids, options, seeds=seeds, parallel=parallel)
+        outcomes += run_grid(methods, ids, options, seeds=seeds, n_seeds=args.seeds,
+                             parallel=parallel)
     labels = ', '.join(f"{n.partition('@')[0]}@{method_class(n).version}" for n in names)
     print(f"{labels} — records in {options.results_dir}")
     print(summary_table(outcomes))

@@ -35,6 +35,11 @@ SOURCES = ("synth", "kitti", "bev")
 FIRST_SYNTH_DATA_VERSION = "1"
 PROTOCOLS = ("paper", "revisit", "bevplace")
 
+#: Noise seeds a cell of a task with noisy queries averages, unless the task says otherwise: five
+#: draws bound the spread of a cell (issue #25: one seed of Stable-AFL's T1R1 on real 00 ranges
+#: 61-96 % recall at 100 % precision) at five times one seed's query work.
+DEFAULT_NOISY_SEEDS = 5
+
 #: Gymnasium's id grammar: `[namespace/]name[-v{version}]`.
 ID_RE = re.compile(r"^(?:(?P<namespace>[\w:-]+)/)?(?P<name>[\w:.-]+?)(?:-v(?P<version>\d+))?$")
 
@@ -77,7 +82,13 @@ class TaskSpec:
     step: every `step`-th frame (0, step, 2*step, ...) is used as database and query frame.
     database_frames, query_frames: [start, stop) frame ranges of the database and the queries
         (protocol "bevplace" only; every `step`-th frame of each range).
-    seed: seed of the viewpoint noise (`safl_bench.noise.sample_offsets`).
+    seed: seed of the viewpoint noise (`safl_bench.noise.sample_offsets`): the first of the
+        task's noise seeds.
+    n_seeds: how many noise seeds a cell of the task averages (`seeds`, from `seed` on); None:
+        `DEFAULT_NOISY_SEEDS` where the queries are drawn with noise (the paper protocol under a
+        condition other than T0R0), 1 where nothing is random (clean queries: the revisit and
+        BEVPlace protocols, T0R0). Not part of the definition: it says how many draws of the
+        same task a cell takes, not what the task is.
     data_version: the version of the synthetic data the task is defined on (source "synth" only;
         None there means the version this safl-bench generates, `synth.GENERATOR_VERSION`).
     map_config: every setting of the top-view maps rendered from scans (None for an image source,
@@ -92,6 +103,7 @@ class TaskSpec:
     step: int = 4
     seed: int = 0
     data_seed: int = 0
+    n_seeds: int | None = None
     map_config: MapConfig | None = field(default_factory=MapConfig)
     database_frames: tuple[int, int] | None = None
     query_frames: tuple[int, int] | None = None
@@ -123,6 +135,9 @@ class TaskSpec:
             object.__setattr__(self, "data_version",
                                current_synth_data_version() if self.data_version is None
                                else str(self.data_version))
+        if self.n_seeds is not None and (isinstance(self.n_seeds, bool)
+                                         or not isinstance(self.n_seeds, int) or self.n_seeds < 1):
+            raise ConfigError(f"task {self.id}: n_seeds must be an integer >= 1, got {self.n_seeds!r}")
         if self.protocol not in PROTOCOLS:
             raise ConfigError(
                 f"task {self.id}: protocol must be one of {PROTOCOLS}, got {self.protocol!r}"
@@ -167,6 +182,17 @@ class TaskSpec:
                 raise ConfigError(
                     f"task {self.id}: the revisit protocol needs a time window >= 0 s"
                 )
+
+    @property
+    def is_random(self) -> bool:
+        """Whether its queries are drawn with noise (the paper protocol, not T0R0)."""
+        return self.protocol == "paper" and not self.condition.is_clean
+
+    @property
+    def seeds(self) -> tuple[int, ...]:
+        """The noise seeds a cell of this task averages: `n_seeds` of them from `seed` on."""
+        n = self.n_seeds if self.n_seeds is not None else (DEFAULT_NOISY_SEEDS if self.is_random else 1)
+        return tuple(range(self.seed, self.seed + n))
 
     def definition(self) -> dict[str, Any]:
         """Everything that changes the task's data or ground truth (no id, version or prose)."""

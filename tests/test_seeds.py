@@ -1,0 +1,103 @@
+"""Seeds are part of a cell: tasks declare how many noise seeds they average, `run` runs them all
+by default, `--seeds N` / `--seed S` override, and the run table shows means with intervals."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from safl_bench import runner, tasks
+from safl_bench.cli import main
+from safl_bench.errors import ConfigError
+from safl_bench.mapconfig import MapConfig
+from safl_bench.method_registry import make_method
+from safl_bench.tasks import spec
+from safl_bench.tasks.spec import DEFAULT_NOISY_SEEDS
+
+NOISY, FIXED = "Test/SeedsNoisy-T1R1-v0", "Test/SeedsFixed-Revisit-v0"
+
+
+@pytest.fixture
+def seed_tasks(kitti_root: Path, safl_home: Path) -> Iterator[None]:
+    tasks.register(NOISY, source="kitti", sequence="00", condition="T1R1", step=1,
+                   map_config=MapConfig(size=32), n_seeds=3)
+    tasks.register(FIXED, source="kitti", sequence="00", protocol="revisit", step=1,
+                   window_s=0.0, tp_radius_m=3.0, fp_radius_m=20.0, map_config=MapConfig(size=32))
+    yield
+    tasks.unregister(NOISY)
+    tasks.unregister(FIXED)
+
+
+def _options(kitti_root: Path, results: Path) -> runner.RunOptions:
+    return runner.RunOptions(results_dir=results, kitti_root=str(kitti_root), progress=False,
+                             timing_frames=2, timing_repeats=1)
+
+
+def test_noisy_tasks_declare_five_seeds_and_fixed_ones_one() -> None:
+    assert DEFAULT_NOISY_SEEDS == 5
+    assert spec("SAFL/Synth00-T1R1-v4").seeds == (0, 1, 2, 3, 4)
+    assert spec("SAFL/BEVKITTI00-T20R2-v0").seeds == (0, 1, 2, 3, 4)
+    for fixed in ("SAFL/Synth00-Revisit-v4", "SAFL/BEVKITTI00-BEVPlace-v0", "SAFL/Synth00-T0R0-v4"):
+        assert spec(fixed).seeds == (0,), fixed
+
+
+def test_a_task_can_declare_its_seed_count_and_a_bad_one_is_refused() -> None:
+    from safl_bench.tasks.spec import TaskSpec
+
+    task = TaskSpec("Test/Own-T1R1-v0", source="synth", sequence="00", condition="T1R1", seed=7,
+                    n_seeds=2)
+    assert task.seeds == (7, 8)
+    # the count says how many draws a cell takes, not what the task is: same fingerprint
+    assert task.fingerprint == TaskSpec("Test/Own-T1R1-v0", source="synth", sequence="00",
+                                        condition="T1R1", seed=7).fingerprint
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ConfigError, match="n_seeds must be an integer >= 1"):
+            TaskSpec("Test/Own-T1R1-v0", source="synth", sequence="00", condition="T1R1", n_seeds=bad)
+
+
+def test_cell_seeds_follow_the_task_unless_overridden() -> None:
+    noisy, fixed = spec("SAFL/Synth00-T5R1-v4"), spec("SAFL/Synth00-Revisit-v4")
+    assert runner.cell_seeds(noisy) == (0, 1, 2, 3, 4)
+    assert runner.cell_seeds(noisy, n_seeds=2) == (0, 1)
+    assert runner.cell_seeds(fixed, n_seeds=3) == (0,)  # nothing random: one seed is the cell
+    assert runner.cell_seeds(fixed, seeds=[4, 2]) == (4, 2)  # asked for by name: run as asked
+
+
+def test_run_runs_every_declared_seed_once_and_reuses_them(seed_tasks, kitti_root, tmp_path) -> None:
+    sad = make_method("sad", size=16)
+    first = runner.run_grid([sad], [NOISY, FIXED], _options(kitti_root, tmp_path))
+    assert [(o.task_id, o.seed, o.status) for o in first] == [
+        (NOISY, 0, "computed"), (FIXED, 0, "computed"), (NOISY, 1, "computed"), (NOISY, 2, "computed")]
+    assert sorted(p.name for p in (tmp_path / "sad@1" / "Test__SeedsNoisy-T1R1-v0").iterdir()) == [
+        "seed-0.json", "seed-1.json", "seed-2.json"]
+    # seeds draw different noise: their queries' confidences differ
+    confidences = {tuple(o.record.results["single_frame"].queries.confidence)  # type: ignore[union-attr]
+                   for o in first if o.task_id == NOISY and o.record is not None}
+    assert len(confidences) == 3
+    again = runner.run_grid([sad], [NOISY, FIXED], _options(kitti_root, tmp_path), n_seeds=2)
+    assert [(o.task_id, o.seed, o.status) for o in again] == [
+        (NOISY, 0, "reused"), (FIXED, 0, "reused"), (NOISY, 1, "reused")]
+    table = runner.summary_table(first).splitlines()
+    assert table[0].split()[:3] == ["task", "seeds", "matcher"]
+    noisy_row = next(line for line in table if line.startswith(NOISY))
+    assert noisy_row.split()[1] == "0-2" and "[" in noisy_row and "computed 3" in noisy_row
+    assert any("95 % interval over seeds and queries" in line for line in table)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--seeds", "0"], "a number of seeds is an integer >= 1, got 0"),
+    (["--seeds", "two"], "a number of seeds is an integer >= 1, got 'two'"),
+    (["--seed", "-1"], "a seed is an integer >= 0, got -1"),
+    (["--seed", "3", "--seed", "1", "--seed", "3"], "--seed 3 given more than once"),
+    (["--seed", "1", "--seeds", "2"], "not allowed with argument"),
+])
+def test_bad_seeds_are_one_line_and_exit_2(args, message, capsys) -> None:
+    try:
+        code = main(["run", "--method", "sad", *args])
+    except SystemExit as exc:  # argparse's refusals
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and message in err
+    assert len(err.strip().splitlines()) == 1, err
