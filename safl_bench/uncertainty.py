@@ -225,22 +225,23 @@ def _draws(n_seeds: int, rng: np.random.Generator, replicates: int) -> np.ndarra
     return rng.integers(0, n_seeds, (replicates, n_seeds))
 
 
-def _replicates(sides: Sequence[Sequence[Outcomes]], replicates: int) -> list[dict[str, np.ndarray]]:
-    """Per side, every measure's (replicates,) values: the mean over the replicate's drawn
-    seeds of the measure on that seed's resampled queries; all sides share the draws."""
+def _replicates(seeds: Sequence[Outcomes], replicates: int) -> dict[str, np.ndarray]:
+    """Every measure's (replicates,) values: the mean over the replicate's drawn seeds of the
+    measure on that seed's resampled queries. The draws depend only on the number of seeds and
+    of queries (a fixed generator), so two cells of the same task get the same resamples: their
+    replicates subtract into a paired difference."""
     rng = np.random.default_rng(BOOTSTRAP_SEED)
-    n_seeds = len(sides[0])
+    n_seeds = len(seeds)
     draws = _draws(n_seeds, rng, replicates)
-    totals: list[dict[str, np.ndarray]] = [{} for _ in sides]
+    total: dict[str, np.ndarray] = {}
     for s in range(n_seeds):
         r_idx, _ = np.nonzero(draws == s)
         if not r_idx.size:
             continue
-        w = block_weights(len(sides[0][s].confidence), r_idx.size, rng)
-        for side, total in zip(sides, totals, strict=True):
-            for name, values in weighted_measures(side[s], w).items():
-                np.add.at(total.setdefault(name, np.zeros(replicates)), r_idx, values)
-    return [{name: v / draws.shape[1] for name, v in total.items()} for total in totals]
+        w = block_weights(len(seeds[s].confidence), r_idx.size, rng)
+        for name, values in weighted_measures(seeds[s], w).items():
+            np.add.at(total.setdefault(name, np.zeros(replicates)), r_idx, values)
+    return {name: v / draws.shape[1] for name, v in total.items()}
 
 
 def _points(seeds: Sequence[Outcomes]) -> dict[str, float]:
@@ -257,15 +258,55 @@ def _interval(point: float, values: np.ndarray, n_seeds: int, n_queries: int) ->
     return Interval(point, float(lo), float(hi), n_seeds, n_queries)
 
 
+@dataclass(frozen=True)
+class Sample:
+    """One cell's bootstrap: every measure's point value (mean over the seeds, all queries) and
+    its replicates. Kept so that intervals and paired differences of many cells cost one
+    bootstrap per cell (`minus` subtracts the replicates of two cells of one task)."""
+
+    points: dict[str, float]
+    values: dict[str, np.ndarray]
+    truth: tuple[tuple[int, bytes], ...]  # per seed: (queries, which have a true place): pairing
+
+    @property
+    def n_seeds(self) -> int:
+        return len(self.truth)
+
+    @property
+    def n_queries(self) -> int:
+        return self.truth[0][0]
+
+    def intervals(self) -> dict[str, Interval]:
+        """Every measure's mean and 95 % interval."""
+        return {name: _interval(self.points[name], self.values[name], self.n_seeds, self.n_queries)
+                for name in self.points}
+
+    def minus(self, other: Sample) -> dict[str, Interval]:
+        """Every measure of this cell minus `other`'s (same seeds and queries): the mean
+        difference and its 95 % interval from the same resamples for both."""
+        if self.n_seeds != other.n_seeds:
+            raise DataError(f"a paired comparison needs the same seeds on both sides, got "
+                            f"{self.n_seeds} and {other.n_seeds}")
+        for s, (x, y) in enumerate(zip(self.truth, other.truth, strict=True)):
+            if x != y:
+                raise DataError(f"seed #{s}: the two sides were not scored on the same queries")
+        return {name: _interval(self.points[name] - other.points[name],
+                                self.values[name] - other.values[name], self.n_seeds, self.n_queries)
+                for name in self.points if name in other.points}
+
+
+def sample(seeds: Sequence[Outcomes], *, replicates: int = REPLICATES) -> Sample:
+    """The bootstrap of one cell (`seeds`: one `Outcomes` per noise seed), module docstring."""
+    if not seeds:
+        raise DataError("no seed to compute an interval from")
+    return Sample(_points(seeds), _replicates(seeds, replicates),
+                  tuple((len(o.confidence), np.packbits(o.has_true_place).tobytes()) for o in seeds))
+
+
 def bootstrap(seeds: Sequence[Outcomes], *, replicates: int = REPLICATES) -> dict[str, Interval]:
     """Every measure's mean over `seeds` (one `Outcomes` per noise seed of one cell) with its
     95 % interval over seeds and queries (module docstring)."""
-    if not seeds:
-        raise DataError("no seed to compute an interval from")
-    points = _points(seeds)
-    (values,) = _replicates([seeds], replicates)
-    n = len(seeds[0].confidence)
-    return {name: _interval(points[name], values[name], len(seeds), n) for name in points}
+    return sample(seeds, replicates=replicates).intervals()
 
 
 def paired_difference(a: Sequence[Outcomes], b: Sequence[Outcomes], *,
@@ -275,11 +316,4 @@ def paired_difference(a: Sequence[Outcomes], b: Sequence[Outcomes], *,
     if len(a) != len(b) or not a:
         raise DataError(f"a paired comparison needs the same seeds on both sides, got {len(a)} "
                         f"and {len(b)}")
-    for s, (x, y) in enumerate(zip(a, b, strict=True)):
-        if len(x.confidence) != len(y.confidence) or not np.array_equal(x.has_true_place,
-                                                                       y.has_true_place):
-            raise DataError(f"seed #{s}: the two sides were not scored on the same queries")
-    pa, pb = _points(a), _points(b)
-    va, vb = _replicates([a, b], replicates)
-    n = len(a[0].confidence)
-    return {name: _interval(pa[name] - pb[name], va[name] - vb[name], len(a), n) for name in pa}
+    return sample(a, replicates=replicates).minus(sample(b, replicates=replicates))
