@@ -76,87 +76,132 @@ def _count_blocks(starts: np.ndarray, n: int, block: int) -> np.ndarray:  # prag
     return out
 
 
-#: The measures `_kernel` writes, in its output's column order.
+#: The measures the kernel writes, in its output's column order.
 _KERNEL_MEASURES = ("recall_at_1", "recall_at_100_precision", "recall_at_100_precision_of_correct",
                     "f1_max", "f1_max_of_correct", "extended_precision",
-                    "extended_precision_of_correct", "auc")
+                    "extended_precision_of_correct", "auc", "recall_at_5", "recall_at_10")
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _row(w: np.ndarray, out: np.ndarray, has_true: np.ndarray, correct: np.ndarray,
+         wrong: np.ndarray, desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray,
+         asc_end: np.ndarray, neg: np.ndarray, hit5: np.ndarray,
+         hit10: np.ndarray) -> None:  # pragma: no cover - compiled
+    """`_KERNEL_MEASURES` of one replicate, query i counted w[i] times, into `out`. The masks
+    are False for queries left out of every measure (no candidate). `desc`: the claimed queries,
+    most confident first; `desc_end[g]`: whether position g ends a run of equal confidence (a
+    threshold). `asc`: the scored queries by rising key (unanswered lowest), `asc_end` likewise;
+    `neg`: wrong or unanswered; `hit5`, `hit10`: a true place among the first 5, 10."""
+    pos = 0.0
+    n_correct = 0.0
+    n5 = 0.0
+    n10 = 0.0
+    for i in range(w.shape[0]):
+        if has_true[i]:
+            pos += w[i]
+        if correct[i]:
+            n_correct += w[i]
+        if hit5[i]:
+            n5 += w[i]
+        if hit10[i]:
+            n10 += w[i]
+    tp = 0.0
+    fp = 0.0
+    r100 = 0.0
+    f1 = 0.0
+    f1c = 0.0
+    p_r0 = 0.0
+    seen = False
+    for g in range(desc.shape[0]):
+        i = desc[g]
+        if correct[i]:
+            tp += w[i]
+        elif wrong[i]:
+            fp += w[i]
+        if not desc_end[g]:
+            continue
+        decided = tp + fp
+        if decided <= 0:
+            continue
+        if not seen:  # precision at the most confident threshold drawn
+            p_r0 = tp / decided
+            seen = True
+        if fp == 0 and tp > r100:
+            r100 = tp
+        f1 = max(f1, 2 * tp / (decided + pos))
+        f1c = max(f1c, 2 * tp / (decided + n_correct))
+    # ROC AUC: correct against wrong and unanswered, ties counted half
+    below = 0.0  # negatives' weight in the groups before this one
+    auc_num = 0.0
+    pos_w = 0.0
+    g0 = 0
+    for g in range(asc.shape[0]):
+        if not asc_end[g]:
+            continue
+        within = 0.0
+        pos_g = 0.0
+        for h in range(g0, g + 1):
+            i = asc[h]
+            if neg[i]:
+                within += w[i]
+            elif correct[i]:
+                pos_g += w[i]
+        auc_num += pos_g * (below + 0.5 * within)
+        pos_w += pos_g
+        below += within
+        g0 = g + 1
+    denom = pos_w * below
+    nan = np.nan
+    r_at_100 = r100 / pos if pos > 0 else nan
+    r_of_correct = r100 / n_correct if n_correct > 0 else 0.0
+    out[0] = n_correct / pos if pos > 0 else nan
+    out[1] = r_at_100
+    out[2] = r_of_correct if pos > 0 else nan
+    out[3] = f1 if pos > 0 else nan
+    out[4] = (f1c if n_correct > 0 else 0.0) if pos > 0 else nan
+    out[5] = (p_r0 + r_at_100) / 2
+    out[6] = (p_r0 + r_of_correct) / 2 if pos > 0 else nan
+    out[7] = auc_num / denom if denom > 0 else nan
+    out[8] = n5 / pos if pos > 0 else nan
+    out[9] = n10 / pos if pos > 0 else nan
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _kernel(w: np.ndarray, has_true: np.ndarray, correct: np.ndarray, wrong: np.ndarray,
-            desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray, asc_end: np.ndarray,
-            neg: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """(R, 8): `_KERNEL_MEASURES` for every row of weights `w` (R, N), one pass over the
-    queries per replicate. `desc`: the claimed queries, most confident first; `desc_end[g]`:
-    whether position g ends a run of equal confidence (a threshold). `asc`: all queries by
-    rising key (unanswered lowest), `asc_end` likewise; `neg`: wrong or unanswered."""
-    n_rep = w.shape[0]
-    out = np.empty((n_rep, 8))
-    for r in range(n_rep):
-        pos = 0.0
-        n_correct = 0.0
-        for i in range(w.shape[1]):
-            if has_true[i]:
-                pos += w[r, i]
-            if correct[i]:
-                n_correct += w[r, i]
-        tp = 0.0
-        fp = 0.0
-        r100 = 0.0
-        f1 = 0.0
-        f1c = 0.0
-        p_r0 = 0.0
-        seen = False
-        for g in range(desc.shape[0]):
-            i = desc[g]
-            if correct[i]:
-                tp += w[r, i]
-            elif wrong[i]:
-                fp += w[r, i]
-            if not desc_end[g]:
-                continue
-            decided = tp + fp
-            if decided <= 0:
-                continue
-            if not seen:  # precision at the most confident threshold drawn
-                p_r0 = tp / decided
-                seen = True
-            if fp == 0 and tp > r100:
-                r100 = tp
-            f1 = max(f1, 2 * tp / (decided + pos))
-            f1c = max(f1c, 2 * tp / (decided + n_correct))
-        # ROC AUC: correct against wrong and unanswered, ties counted half
-        below = 0.0  # negatives' weight in the groups before this one
-        auc_num = 0.0
-        pos_w = 0.0
-        g0 = 0
-        for g in range(asc.shape[0]):
-            if not asc_end[g]:
-                continue
-            within = 0.0
-            pos_g = 0.0
-            for h in range(g0, g + 1):
-                i = asc[h]
-                if neg[i]:
-                    within += w[r, i]
-                elif correct[i]:
-                    pos_g += w[r, i]
-            auc_num += pos_g * (below + 0.5 * within)
-            pos_w += pos_g
-            below += within
-            g0 = g + 1
-        denom = pos_w * below
-        nan = np.nan
-        r_at_100 = r100 / pos if pos > 0 else nan
-        r_of_correct = r100 / n_correct if n_correct > 0 else 0.0
-        out[r, 0] = n_correct / pos if pos > 0 else nan
-        out[r, 1] = r_at_100
-        out[r, 2] = r_of_correct if pos > 0 else nan
-        out[r, 3] = f1 if pos > 0 else nan
-        out[r, 4] = (f1c if n_correct > 0 else 0.0) if pos > 0 else nan
-        out[r, 5] = (p_r0 + r_at_100) / 2
-        out[r, 6] = (p_r0 + r_of_correct) / 2 if pos > 0 else nan
-        out[r, 7] = auc_num / denom if denom > 0 else nan
+def _weighted_kernel(w: np.ndarray, has_true: np.ndarray, correct: np.ndarray, wrong: np.ndarray,
+                     desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray, asc_end: np.ndarray,
+                     neg: np.ndarray, hit5: np.ndarray,
+                     hit10: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """(R, 10): `_row` for every row of weights `w` (R, N)."""
+    out = np.empty((w.shape[0], 10))
+    for r in range(w.shape[0]):
+        _row(w[r], out[r], has_true, correct, wrong, desc, desc_end, asc, asc_end, neg, hit5, hit10)
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy", parallel=True)
+def _block_kernel(starts: np.ndarray, block: int, has_true: np.ndarray, correct: np.ndarray,
+                  wrong: np.ndarray, desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray,
+                  asc_end: np.ndarray, neg: np.ndarray, hit5: np.ndarray,
+                  hit10: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """(R, 10): `_row` for the circular block resamples whose blocks start at `starts` (R, B):
+    the weights `block_weights` would give, counted one replicate at a time (no (R, N) matrix),
+    replicates in parallel."""
+    n = has_true.shape[0]
+    out = np.empty((starts.shape[0], 10))
+    for r in numba.prange(starts.shape[0]):
+        w = np.zeros(n)
+        drawn = 0
+        for b in range(starts.shape[1]):
+            j = starts[r, b]
+            for _ in range(block):
+                if drawn == n:
+                    break
+                w[j] += 1.0
+                drawn += 1
+                j += 1
+                if j == n:
+                    j = 0
+        _row(w, out[r], has_true, correct, wrong, desc, desc_end, asc, asc_end, neg, hit5, hit10)
     return out
 
 
@@ -165,33 +210,54 @@ def _run_ends(sorted_keys: np.ndarray) -> np.ndarray:
     return np.r_[sorted_keys[1:] != sorted_keys[:-1], True] if len(sorted_keys) else np.zeros(0, bool)
 
 
+def _kernel_inputs(o: Outcomes) -> tuple[np.ndarray, ...]:
+    """The masks and orders `_row` reads, over all of `o`'s queries (those without a candidate
+    are in no mask and no order: left out of every measure, as in `safl_bench.metrics`)."""
+    scored = o.has_candidate
+    claimed = scored & np.isfinite(o.confidence)
+    correct = claimed & (o.label == CORRECT)
+    wrong = claimed & (o.label != CORRECT) & (o.label != AMBIGUOUS)
+    has_true = scored & o.has_true_place
+    # thresholds: the distinct confidences of the claimed queries, most confident first
+    mine = np.flatnonzero(claimed)
+    desc = mine[np.argsort(-o.confidence[mine], kind="stable")]
+    key = np.where(claimed, o.confidence, -np.inf)
+    kept = np.flatnonzero(scored)
+    asc = kept[np.argsort(key[kept], kind="stable")]
+    if o.true_rank is not None:
+        hit5 = has_true & (o.true_rank >= 1) & (o.true_rank <= 5)
+        hit10 = has_true & (o.true_rank >= 1) & (o.true_rank <= 10)
+    else:
+        hit5 = hit10 = np.zeros(len(scored), bool)
+    return (has_true, correct, wrong, desc, _run_ends(o.confidence[desc]), asc,
+            _run_ends(key[asc]), scored & (wrong | ~claimed), hit5, hit10)
+
+
+def _named(o: Outcomes, values: np.ndarray) -> dict[str, np.ndarray]:
+    names = _KERNEL_MEASURES if o.true_rank is not None else _KERNEL_MEASURES[:-2]
+    return {name: values[:, j] for j, name in enumerate(names)}
+
+
 def weighted_measures(o: Outcomes, w: np.ndarray) -> dict[str, np.ndarray]:
     """Each measure of `measure_names` for every row of query weights `w` (R, N): the
     definitions of `safl_bench.metrics` with query i counted w[r, i] times. NaN where a measure
-    is undefined for a replicate (no positive drawn; AUC with one class). Compiled (`_kernel`,
-    one pass over the queries per replicate), so a thousand replicates cost milliseconds."""
-    scored = o.has_candidate
-    conf, label = o.confidence[scored], o.label[scored]
-    has_true = o.has_true_place[scored]
-    w = np.ascontiguousarray(np.asarray(w, dtype=np.float64)[:, scored])
-    claimed = np.isfinite(conf)
-    correct = claimed & (label == CORRECT)
-    wrong = claimed & (label != CORRECT) & (label != AMBIGUOUS)
-    # thresholds: the distinct confidences of the claimed queries, most confident first
-    desc = np.flatnonzero(claimed)[np.argsort(-conf[claimed], kind="stable")]
-    key = np.where(claimed, conf, -np.inf)
-    asc = np.argsort(key, kind="stable")
-    values = _kernel(w, has_true, correct, wrong, desc, _run_ends(conf[desc]), asc,
-                     _run_ends(key[asc]), wrong | ~claimed)
-    out = {name: values[:, j] for j, name in enumerate(_KERNEL_MEASURES)}
-    if o.true_rank is not None:
-        rank = o.true_rank[scored]
-        pos = w @ has_true.astype(np.float64)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            for n in (5, 10):
-                hits = w @ (has_true & (rank >= 1) & (rank <= n)).astype(np.float64)
-                out[f"recall_at_{n}"] = np.where(pos > 0, hits / np.where(pos > 0, pos, 1), np.nan)
-    return out
+    is undefined for a replicate (no positive drawn; AUC with one class); Recall@5 and @10 only
+    where the outcomes hold ranks. Compiled (`_row`, one pass over the queries per replicate)."""
+    w = np.ascontiguousarray(w, dtype=np.float64)
+    return _named(o, _weighted_kernel(w, *_kernel_inputs(o)))
+
+
+def block_measures(o: Outcomes, replicates: int, rng: np.random.Generator,
+                   block: int = BLOCK) -> dict[str, np.ndarray]:
+    """`weighted_measures` of `replicates` circular block resamples of `o`'s queries: the same
+    values as ``weighted_measures(o, block_weights(n, replicates, rng, block))`` (the same
+    draws of `rng`), without the (replicates, n) weight matrix."""
+    n = len(o.confidence)
+    if n <= 0:
+        raise DataError("cannot resample an empty set of queries")
+    block = max(1, min(block, n))
+    starts = rng.integers(0, n, (replicates, -(-n // block)))
+    return _named(o, _block_kernel(starts, block, *_kernel_inputs(o)))
 
 
 @dataclass(frozen=True)
@@ -238,8 +304,7 @@ def _replicates(seeds: Sequence[Outcomes], replicates: int) -> dict[str, np.ndar
         r_idx, _ = np.nonzero(draws == s)
         if not r_idx.size:
             continue
-        w = block_weights(len(seeds[s].confidence), r_idx.size, rng)
-        for name, values in weighted_measures(seeds[s], w).items():
+        for name, values in block_measures(seeds[s], r_idx.size, rng).items():
             np.add.at(total.setdefault(name, np.zeros(replicates)), r_idx, values)
     return {name: v / draws.shape[1] for name, v in total.items()}
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from safl_bench import metrics
 from safl_bench.provenance import Environment
 from safl_bench.records import (
     MethodInfo,
@@ -12,6 +13,7 @@ from safl_bench.records import (
     TaskInfo,
     Timings,
     make_mode_result,
+    mode_result_from_evaluation,
 )
 
 SYNTH_LABEL = "synthetic default (seed 0)"
@@ -105,3 +107,39 @@ def make_record(
         ),
         created=created,
     )
+
+
+def random_outcomes(seed: int, n: int = 200, skill: float = 0.7) -> metrics.Outcomes:
+    """A method that answers a share `skill` of its queries correctly, more confidently."""
+    rng = np.random.default_rng(seed)
+    has_true = rng.random(n) < 0.9
+    correct = has_true & (rng.random(n) < skill)
+    band = ~correct & (rng.random(n) < 0.1)
+    conf = np.where(correct, rng.normal(1.0, 1.0, n), rng.normal(0.0, 1.0, n))
+    conf[rng.random(n) < 0.05] = -np.inf
+    correct &= np.isfinite(conf)
+    band &= np.isfinite(conf)
+    rank = np.where(has_true, np.where(correct, 1, rng.integers(2, 20, n)), 0)
+    return metrics.outcomes(conf, correct, has_true, ambiguous=band, true_rank=rank)
+
+
+def task_outcomes(seed: int, skill: float, variant: int = 0, n: int = 200) -> metrics.Outcomes:
+    """A method's answers (of `skill`; `variant` draws another method of the same skill) on the
+    queries of seed `seed` of one task: every method gets the same positives and candidates."""
+    truth = random_outcomes(seed, n, skill=0.9)
+    o = random_outcomes(1000 * seed + 17 * variant + int(1000 * skill), n, skill=skill)
+    return metrics.Outcomes(o.confidence, np.where(truth.has_true_place, o.label, -1).astype(np.int8),
+                            truth.has_true_place, truth.has_candidate,
+                            np.where(truth.has_true_place, np.maximum(o.true_rank, 1), 0))
+
+
+def scored_record(method: str, *, seed: int = 0, skill: float = 0.7, variant: int = 0,
+                  **fields: object) -> ResultRecord:
+    """A `make_record` whose metrics and per-query outcomes are those of `task_outcomes` (both
+    matching modes the same): a record intervals and paired differences can be computed from."""
+    import dataclasses
+
+    o = task_outcomes(seed, skill, variant)
+    mode = mode_result_from_evaluation(metrics.evaluate_outcomes(o), o)
+    record = make_record(method, seed=seed, **fields)  # type: ignore[arg-type]
+    return dataclasses.replace(record, results={"sequence": mode, "single_frame": mode})

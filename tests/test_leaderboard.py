@@ -16,6 +16,7 @@ from safl_bench.leaderboard.grouping import Cell, aggregate, condition_order, gr
 from safl_bench.leaderboard.tables import (
     auc_table,
     bevplace_table,
+    recall_at_1_table,
     recall_table,
     revisit_table,
     time_table,
@@ -50,28 +51,31 @@ def test_recall_table_has_exact_cells_and_dashes_for_missing() -> None:
         f"## Recall at 100 % precision (%) — {SYNTH_LABEL}, sequence 00, paper protocol, "
         "task version v0\n"
     )
+    # records without per-query outcomes: no interval, so no order beyond the noise (tied, ≈)
     assert _rows(md) == [
         "| Method | Version | Matching | T1R1 | T5R1 |",
-        "| sad | 1 | sequence | 28.3 | — |",
-        "| sad | 1 | single-frame | 30.0 | — |",
-        "| stable_afl | 1 | sequence | **90.9** | 58.4 |",
-        "| stable_afl | 1 | single-frame | **45.5** | 29.2 |",
+        "| sad | 1 | sequence | ≈ 28.3 | — |",
+        "| sad | 1 | single-frame | ≈ 30.0 | — |",
+        "| stable_afl | 1 | sequence | ≈ 90.9 | 58.4 |",
+        "| stable_afl | 1 | single-frame | ≈ 45.5 | 29.2 |",
     ]
+    assert any("Cells without an interval" in note for note in _table(_paper_records()).notes)
     assert "nan" not in md.lower()
 
 
 def test_csv_has_numbers_source_and_empty_missing_cells() -> None:
     csv = _table(_paper_records()).csv().splitlines()
-    assert csv[0] == "Source,Protocol,Sequence,Task version,Method,Version,Matching,T1R1,T5R1,Seeds"
-    assert csv[1] == f"{SYNTH_LABEL},paper,00,0,sad,1,sequence,28.3,,0"
-    assert csv[4] == f"{SYNTH_LABEL},paper,00,0,stable_afl,1,single-frame,45.5,29.2,0"
+    assert csv[0] == ("Source,Protocol,Sequence,Task version,Method,Version,Matching,T1R1,T1R1 low,"
+                      "T1R1 high,T1R1 rank,T5R1,T5R1 low,T5R1 high,T5R1 rank,Seeds")
+    assert csv[1] == f"{SYNTH_LABEL},paper,00,0,sad,1,sequence,28.3,,,tied,,,,,0"
+    assert csv[4] == f"{SYNTH_LABEL},paper,00,0,stable_afl,1,single-frame,45.5,,,tied,29.2,,,,0"
 
 
 def test_auc_and_time_tables() -> None:
     records = _paper_records()
     auc = _rows(_table(records, auc_table).markdown())
-    assert auc[1] == "| sad | 1 | sequence | 0.800 | — |"
-    assert auc[4] == "| stable_afl | 1 | single-frame | **0.855** | 0.810 |"
+    assert auc[1] == "| sad | 1 | sequence | ≈ 0.800 | — |"
+    assert auc[4] == "| stable_afl | 1 | single-frame | ≈ 0.855 | 0.810 |"
     timing = _table(records, time_table)
     rows = _rows(timing.markdown())
     assert rows == [
@@ -82,7 +86,7 @@ def test_auc_and_time_tables() -> None:
     assert any("Test CPU (2 cores)" in note for note in timing.notes)
 
 
-def test_seeds_are_averaged_only_over_complete_cells() -> None:
+def test_a_cell_with_other_seeds_than_the_table_names_them() -> None:
     records = [
         make_record("a", condition="T1R1", seed=0, recall=0.5),
         make_record("a", condition="T1R1", seed=1, recall=0.7),
@@ -90,17 +94,47 @@ def test_seeds_are_averaged_only_over_complete_cells() -> None:
     ]
     table = _table(records)
     rows = _rows(table.markdown())
-    assert rows[1] == "| a | 1 | sequence | 60.0 ± 14.1 | — |"
-    assert any("T5R1 lack seed(s) 1" in note for note in table.notes)
-    assert "Mean ± sample standard deviation over seeds 0, 1" in table.markdown()
+    assert rows[1] == "| a | 1 | sequence | 60.0 | 40.0 (seed 0) |"
+    assert any("T5R1 over seed(s) 0 only (the table's: 0, 1)" in note for note in table.notes)
+    assert "Mean over seeds 0, 1 [95 % interval over seeds and queries]" in table.markdown()
     header = table.csv().splitlines()[0].split(",")
-    assert "T1R1 std" in header
+    assert {"T1R1 low", "T1R1 high", "T5R1 seeds"} <= set(header) and "T1R1 seeds" not in header
+
+
+def test_cells_carry_bootstrap_intervals_and_bold_means_better_beyond_the_noise() -> None:
+    from record_factory import scored_record
+
+    records = [scored_record(m, seed=s, skill=k, variant=v, condition="T1R1")
+               for m, k, v in (("strong", 0.95, 0), ("weak", 0.3, 0)) for s in range(3)]
+    records += [scored_record(m, seed=s, skill=0.6, variant=v, condition="T5R1")
+                for m, v in (("strong", 1), ("weak", 2)) for s in range(3)]
+    table = _table(records, recall_at_1_table)
+    (t1,) = [j for j, c in enumerate(table.columns) if c == "T1R1"]
+    (t5,) = [j for j, c in enumerate(table.columns) if c == "T5R1"]
+    strong = table.rows.index(("strong", "1", "sequence"))
+    weak = table.rows.index(("weak", "1", "sequence"))
+    cell = table.cells[strong][t1]
+    assert cell is not None and cell.low is not None and cell.high is not None
+    assert cell.low < cell.mean < cell.high and cell.seeds == frozenset({0, 1, 2})
+    md = table.markdown()
+    text = table.cell_text(cell, table.formats[t1])
+    assert f"| strong | 1 | sequence | **{text}** |" in md  # a resolved difference: bold alone
+    assert table.marks[(strong, t1)] == "best" and (weak, t1) not in table.marks
+    # same skill, other draws: not resolved, both marked tied, neither bold
+    assert table.marks[(strong, t5)] == table.marks[(weak, t5)] == "tied"
+    assert "≈ " + table.cell_text(table.cells[weak][t5], table.formats[t5]) in md
+    # one seed of one method: compared on the seed both have, and named in its cell
+    lone = [r for r in records if not (r.method.name == "weak" and r.seed > 0)]
+    table = _table(lone, recall_at_1_table)
+    weak = table.rows.index(("weak", "1", "sequence"))
+    assert "(seed 0)" in table.cell_text(table.cells[weak][t1], table.formats[t1])
+    assert table.marks[(table.rows.index(("strong", "1", "sequence")), t1)] == "best"
 
 
 def test_aggregate_rules() -> None:
-    assert aggregate({0: 0.5}, frozenset({0, 1})) is None
-    assert aggregate({0: 0.5, 1: None}, frozenset({0, 1})) == Cell(None, None, 2)
-    assert aggregate({0: 0.5}, frozenset({0})) == Cell(0.5, None, 1)
+    assert aggregate({}) is None
+    assert aggregate({0: 0.5, 1: None}) == Cell(None, seeds=frozenset({0, 1}))
+    assert aggregate({0: 0.5, 3: 0.7}) == Cell(pytest.approx(0.6), seeds=frozenset({0, 3}))
 
 
 def test_task_versions_and_sources_are_never_mixed() -> None:
@@ -147,9 +181,9 @@ def test_revisit_table() -> None:
         "| Method | Version | Matching | 00 F1max | 00 R@100P (%) | 00 AUC | 00 R@1 (%) "
         "| 09 F1max | 09 R@100P (%) | 09 AUC | 09 R@1 (%) |"
     )
-    assert rows[1] == ("| a | 1 | sequence | **0.800** | **50.0** | **0.900** | 90.0 | 0.600 | 40.0 "
+    assert rows[1] == ("| a | 1 | sequence | ≈ 0.800 | ≈ 50.0 | ≈ 0.900 | 90.0 | 0.600 | 40.0 "
                        "| 0.800 | n/a |")
-    assert rows[3] == "| b | 1 | sequence | 0.500 | 30.0 | 0.700 | n/a | — | — | — | — |"
+    assert rows[3] == "| b | 1 | sequence | ≈ 0.500 | ≈ 30.0 | ≈ 0.700 | n/a | — | — | — | — |"
 
 
 def test_bevplace_table_and_the_published_rows_beside_it(tmp_path) -> None:
@@ -216,7 +250,7 @@ def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> Non
     index = files["index.md"].decode()
     assert "## Headline" in index and "**Protocol:** revisit" in index.split("## Headline")[1]
     recall = files[f"tables/{SRC}/paper-00-v0-recall.md"].decode()
-    assert "| stable_afl | 1 | sequence | **90.9** | 58.4 |" in recall
+    assert "| stable_afl | 1 | sequence | ≈ 90.9 | 58.4 |" in recall
     # Regenerating without the revisit record removes its table and keeps hand-written files.
     (out1 / "README.md").write_text("hand-written\n")
     report = build_leaderboard(records[:3], out1, figures=False, site=False)
@@ -273,7 +307,7 @@ def test_cli_reports_corrupt_records_and_rebuilds(tmp_path: Path, capsys) -> Non
     assert cli_main(["leaderboard", "--out", str(out), "--no-figures"]) == 0
     captured = capsys.readouterr()
     assert str(bad) in captured.err and "not valid JSON" in captured.err
-    assert "| stable_afl | 1 | sequence | **90.9** | 58.4 |" in captured.out
+    assert "| stable_afl | 1 | sequence | ≈ 90.9 | 58.4 |" in captured.out
     index = (out / "index.md").read_text()
     assert "broken@1/SAFL__Synth00-T1R1-v0/seed-0.json" in index
     first = {p: p.read_bytes() for p in out.rglob("*.md")}
@@ -342,9 +376,11 @@ def test_committed_leaderboard_is_regenerated_exactly(tmp_path: Path) -> None:
     assert (tmp_path / "index.md").read_bytes() == (REPO_BOARD / "index.md").read_bytes()
 
 
-def test_equal_values_are_not_bold() -> None:
+def test_equal_values_are_neither_bold_nor_tied() -> None:
     records = [make_record(m, condition="T1R1", recall=0.5) for m in ("a", "b")]
-    assert "**" not in _table(records).markdown()
+    table = _table(records)
+    assert table.marks == {} and "≈ 50" not in table.markdown()
+    assert not any("**" in row for row in _rows(table.markdown()))
 
 
 def test_real_kitti_paper_tables_gain_one_table_by_matcher_preset(tmp_path) -> None:

@@ -21,7 +21,7 @@ from safl_bench.leaderboard.headline import (
     readme_block,
     update_readme,
 )
-from safl_bench.leaderboard.site import write_site
+from safl_bench.leaderboard.site import page_file, write_site
 from safl_bench.records import load_records
 
 REPO = Path(__file__).resolve().parents[1]
@@ -63,13 +63,26 @@ def test_headline_is_real_kitti_and_says_what_it_is(board: Path) -> None:
         assert f"<dt>{name}</dt>" in page
 
 
-def test_cells_over_several_seeds_show_their_interval(board: Path) -> None:
-    section = read_page((board / "site" / "index.html").read_text(encoding="utf-8")).sections[0]
-    col = section.header.index("00 F1max")
-    row = next(i for i, r in enumerate(section.rows) if r[0] == "sad" and r[2] == "sequence")
-    # seeds 0 and 1: 0.80 and 0.76 -> mean 0.780, sample standard deviation 0.028
-    assert section.rows[row][col] == "0.780 ± 0.028"
-    assert section.intervals[row][col] == "[0.752, 0.808]"
+def test_cells_show_their_interval_and_bold_only_beyond_the_noise(tmp_path: Path) -> None:
+    import dataclasses
+
+    from record_factory import scored_record
+
+    from safl_bench.matcher_presets import configure
+
+    paper = configure("paper").to_dict()
+    records = [dataclasses.replace(scored_record(m, seed=s, skill=k, condition="T1R1"), matcher=paper)
+               for m, k in (("strong", 0.95), ("weak", 0.3)) for s in (0, 1)]
+    report = build_leaderboard(records, tmp_path / "lb", figures=False)
+    published = next(p for p in report.tables if p.table.title.startswith("Recall@1"))
+    table = published.table
+    strong = table.rows.index(("strong", "1", "sequence"))
+    cell, fmt = table.cells[strong][0], table.formats[0]
+    assert cell is not None and cell.low is not None and table.marks[(strong, 0)] == "best"
+    page = (tmp_path / "lb" / "site" / f"{page_file(published.key)}").read_text(encoding="utf-8")
+    html = page.split("Recall@1 (%)")[1]  # the Recall@1 table's section
+    assert f"<strong>{fmt.number(cell.mean)}</strong>" in html
+    assert f'<span class="interval">[{fmt.number(cell.low)}, {fmt.number(cell.high)}]</span>' in html
 
 
 def test_a_corrupt_record_is_named_in_one_line_and_the_rest_is_built(tmp_path: Path, capsys) -> None:
@@ -118,7 +131,7 @@ def test_readme_block_is_rewritten_between_its_markers(board: Path, tmp_path: Pa
     assert update_readme(readme, report.headline, report.headline_records)
     text = readme.read_text()
     assert text.startswith("# x\n\nbefore\n\n") and text.endswith("\n\nafter\n")
-    assert "| sad | 1 | sequence | 0.780 ± 0.028 |" in text and "Matcher preset (all rows)" not in text
+    assert "| sad | 1 | sequence | ≈ 0.780 |" in text and "Matcher preset (all rows)" not in text
     assert not update_readme(readme, report.headline, report.headline_records)  # unchanged
     plain = tmp_path / "PLAIN.md"
     plain.write_text("no markers\n")

@@ -79,7 +79,7 @@ def test_sort_filter_and_detail_in_chromium(tmp_path: Path) -> None:
         for r in rows:
             mode = "sequence" if r[2] == "sequence" else "single_frame"
             mean = f"{expected_f1('sad', mode, '00'):.3f}"
-            assert r[col].startswith(f"{mean} ± ")
+            assert r[col].removeprefix("≈ ").startswith(mean)  # tied: records without outcomes
         assert page.url.endswith("#method=sad")
         page.screenshot(path=str(shots / "screenshot-headline-filtered.png"), full_page=True)
 

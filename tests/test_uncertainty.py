@@ -6,24 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from record_factory import random_outcomes, scored_record
 
 from safl_bench import metrics, uncertainty
 from safl_bench.errors import DataError
-
-
-def random_outcomes(seed: int, n: int = 200, skill: float = 0.7) -> metrics.Outcomes:
-    """A method that answers a share `skill` of its queries correctly, more confidently."""
-    rng = np.random.default_rng(seed)
-    has_true = rng.random(n) < 0.9
-    correct = has_true & (rng.random(n) < skill)
-    band = ~correct & (rng.random(n) < 0.1)
-    conf = np.where(correct, rng.normal(1.0, 1.0, n), rng.normal(0.0, 1.0, n))
-    conf[rng.random(n) < 0.05] = -np.inf
-    correct &= np.isfinite(conf)
-    band &= np.isfinite(conf)
-    rank = np.where(has_true, np.where(correct, 1, rng.integers(2, 20, n)), 0)
-    return metrics.outcomes(conf, correct, has_true, ambiguous=band, true_rank=rank)
-
 
 NAMES = {"recall_at_100_precision": "recall_at_100",
          "recall_at_100_precision_of_correct": "recall_at_100_of_correct",
@@ -102,25 +88,12 @@ def test_paired_differences_resolve_a_better_method_and_tie_a_method_with_itself
 
 
 def test_compare_prints_paired_differences_and_a_verdict(tmp_path, capsys) -> None:
-    import dataclasses
-
-    from record_factory import make_record
-
     from safl_bench.cli import main
-    from safl_bench.records import mode_result_from_evaluation, write_record
+    from safl_bench.records import write_record
 
     for name, skill in (("good", 0.9), ("bad", 0.3)):
         for seed in (0, 1):
-            o = random_outcomes(seed, skill=skill)
-            # same queries on both sides: positives and candidates of seed `seed`
-            base = random_outcomes(seed, skill=0.9)
-            o = metrics.Outcomes(o.confidence, np.where(base.has_true_place, o.label, -1).astype(np.int8),
-                                 base.has_true_place, base.has_candidate,
-                                 np.where(base.has_true_place, np.maximum(o.true_rank, 1), 0))
-            mode = mode_result_from_evaluation(metrics.evaluate_outcomes(o), o)
-            rec = make_record(name, seed=seed)
-            write_record(tmp_path, dataclasses.replace(rec, results={"sequence": mode,
-                                                                     "single_frame": mode}))
+            write_record(tmp_path, scored_record(name, seed=seed, skill=skill))
     assert main(["compare", "--method", "good", "--method", "bad", "--results", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "seeds 0, 1" in out and "A - B" in out
@@ -133,3 +106,13 @@ def test_a_method_that_reports_no_match_has_zero_measures_and_an_interval() -> N
     cell = uncertainty.bootstrap([o], replicates=50)
     assert cell["recall_at_1"].mean == 0.0 and cell["f1_max"].high == 0.0
     assert np.isnan(cell["auc"].mean)  # one class only, as the metrics say (None)
+
+
+def test_block_measures_are_the_weighted_measures_of_the_block_weights() -> None:
+    o = random_outcomes(3)
+    fused = uncertainty.block_measures(o, 40, np.random.default_rng(9))
+    weights = uncertainty.block_weights(len(o.confidence), 40, np.random.default_rng(9))
+    direct = uncertainty.weighted_measures(o, weights)
+    assert fused.keys() == direct.keys()
+    for name in direct:
+        np.testing.assert_array_equal(fused[name], direct[name], err_msg=name)

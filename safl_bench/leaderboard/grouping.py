@@ -8,10 +8,10 @@ Rules (the leaderboard's README states them for readers):
 * Within a table, records of one task id must share the task's spec fingerprint. If they do not
   (the task changed without a version bump), only the records with the newest spec are used and
   a note says which were left out.
-* Seeds: a table's seed set is every seed any of its records used. A cell is filled only when it
-  has a record for each of those seeds; it then shows the mean (and the sample standard deviation
-  when there are several seeds). A cell lacking a seed shows "—" and a note names what is
-  missing: no average over an incomplete set of runs.
+* Seeds: a table's seed set is every seed any of its records used. A cell shows the mean over
+  its own seeds and its 95 % interval over seeds and queries (`leaderboard.intervals`); a cell
+  whose seeds are not the table's names its seeds in the cell and in a note, and is compared
+  with the others on the seeds both have (paired), never as if its runs were alike.
 """
 
 from __future__ import annotations
@@ -137,27 +137,31 @@ def _condition_sort_key(name: str) -> tuple[int, float, float, str]:
 
 @dataclass(frozen=True)
 class Cell:
-    """One table cell over a complete set of seeds.
+    """One table cell over the seeds it has records of.
 
     `mean` is None when the metric is undefined for some seed (e.g. a task without positives).
-    `std` is the sample standard deviation, None for a single seed.
+    `low`, `high`: its 95 % interval (None when none can be computed); `seeds`: its seeds.
     """
 
     mean: float | None
-    std: float | None
-    n_seeds: int
+    low: float | None = None
+    high: float | None = None
+    seeds: frozenset[int] = frozenset()
+
+    @property
+    def n_seeds(self) -> int:
+        return len(self.seeds)
 
 
-def aggregate(values: Mapping[int, float | None], seeds: frozenset[int]) -> Cell | None:
-    """Combine per-seed values into a Cell, or None (missing) unless every seed in `seeds` is there."""
-    if not seeds or set(values) != set(seeds):
+def aggregate(values: Mapping[int, float | None]) -> Cell | None:
+    """The mean of per-seed values as a Cell (no interval yet), None (missing) when there is none."""
+    if not values:
         return None
+    seeds = frozenset(values)
     ordered = [values[s] for s in sorted(seeds)]
     if any(v is None for v in ordered):
-        return Cell(mean=None, std=None, n_seeds=len(ordered))
-    array = np.asarray(ordered, dtype=np.float64)
-    std = float(np.std(array, ddof=1)) if array.size > 1 else None
-    return Cell(mean=float(np.mean(array)), std=std, n_seeds=int(array.size))
+        return Cell(mean=None, seeds=seeds)
+    return Cell(mean=float(np.mean(np.asarray(ordered, dtype=np.float64))), seeds=seeds)
 
 
 def seed_set(records: Iterable[ResultRecord]) -> frozenset[int]:

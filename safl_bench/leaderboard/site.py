@@ -2,7 +2,7 @@
 
 Written by `safl-bench leaderboard` from the `BuildReport` of the same regeneration, so every
 table is the very `Table` its Markdown file was printed from and every cell shows the text the
-Markdown shows (`Table.cell_text`, bold where the Markdown is bold). Pages:
+Markdown shows (`Table.cell_text`, bold and "≈" where the Markdown has them). Pages:
 
     site/index.html             the headline (real KITTI when there are records of it): what it
                                 is (source, protocol, matcher preset, seeds), how to read it, the
@@ -16,7 +16,8 @@ on their header; rows filter by source, protocol, matcher preset and method (the
 in the address's `#fragment`, so a filtered page can be bookmarked); each cell's tooltip names
 the records behind it, and a click opens a detail view with each seed's value, the record file,
 when and where it was made, and the `safl-bench explain` command that draws the cell. Where a
-table has several seeds a cell also shows its interval, mean ± one sample standard deviation.
+cell shows its mean and, under it, its 95 % interval over seeds and queries; bold is best beyond
+the noise and "≈" tied for best, as in the Markdown (`leaderboard.intervals`).
 Which record gives which cell is found by calling the table's own builder on one record at a
 time (`PublishedTable.rebuild`), never by reading column names. A figure that is missing when
 the site is written, or later, shows a placeholder naming the file and the command that draws it.
@@ -36,7 +37,8 @@ from safl_bench.atomic import atomic_write_text
 from safl_bench.leaderboard.build import BuildReport, PublishedTable, headline_rank
 from safl_bench.leaderboard.grouping import TableKey, slugify
 from safl_bench.leaderboard.headline import READING, facts
-from safl_bench.leaderboard.tables import MISSING, RowKey, Table, ValueFormat
+from safl_bench.leaderboard.intervals import BEST, TIED, without_intervals
+from safl_bench.leaderboard.tables import RowKey, Table, ValueFormat, seeds_sentence
 from safl_bench.records import Problem, ResultRecord, record_path
 from safl_bench.sources import ROOT_OPTION
 
@@ -202,7 +204,7 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
     key = table.key
     sid = _table_id(published)
     provenance = _provenance(published)
-    best = table._best()
+    marks = table.marks
     show = [(i, h) for i, h in enumerate(table.row_header) if h]
     head = "".join(f'<th data-type="text" scope="col">{_e(h)}</th>' for _, h in show)
     head += "".join(f'<th data-type="num" scope="col">{_e(c)}</th>' for c in table.columns)
@@ -218,7 +220,7 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
         }
         cells = "".join(f"<td>{_e(row[k])}</td>" for k, _ in show)
         for j, fmt in enumerate(table.formats):
-            cells += _cell(table, i, j, fmt, (i, j) in best, provenance.get((row, j), []), registry)
+            cells += _cell(table, i, j, fmt, marks.get((i, j)), provenance.get((row, j), []), registry)
         rows.append(f"<tr {_attrs(attrs)}>{cells}</tr>")
     notes = "".join(f"<li>{_inline_code(n)}</li>" for n in table.notes)
     beside = ('<aside class="figures">' + "".join(_figure(out, rel, label) for label, rel in figures)
@@ -234,7 +236,7 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
     return (
         f"<section {_attrs(section_attrs)}>"
         f"<h2>{_e(table.heading)}</h2>"
-        f'<p class="meta">{_e(_seeds_line(table))} · {md_link} · '
+        f'<p class="meta">{_e(seeds_sentence(table).replace("**Bold**", "Bold"))} · {md_link} · '
         f'<a href="../{_e(csv)}">CSV</a></p>'
         f'<div class="body"><div class="scroll"><table class="sortable">'
         f"<thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table></div>{beside}</div>"
@@ -244,27 +246,22 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
     )
 
 
-def _seeds_line(table: Table) -> str:
-    seeds = sorted(table.seeds)
-    if len(seeds) == 1:
-        return f"Seed {seeds[0]}. Missing cells (not run) show {MISSING}."
-    return (f"Mean ± sample standard deviation over seeds {', '.join(map(str, seeds))}; "
-            f"the interval under a value is mean ± one standard deviation.")
-
-
-def _cell(table: Table, i: int, j: int, fmt: ValueFormat, bold: bool,
+def _cell(table: Table, i: int, j: int, fmt: ValueFormat, mark: str | None,
           sources: list[tuple[ResultRecord, float | None]], registry: _Registry) -> str:
     cell = table.cells[i][j]
-    text = table.cell_text(cell, fmt)
-    shown = f"<strong>{_e(text)}</strong>" if bold else _e(text)
+    text = table.value_text(cell, fmt)
+    shown = (f"<strong>{_e(text)}</strong>" if mark == BEST else
+             f'<span class="tied" title="tied for best">≈ {_e(text)}</span>' if mark == TIED else _e(text))
     attrs: dict[str, str] = {"class": "cell"}
     if cell is not None and cell.mean is not None:
         attrs["data-value"] = fmt.number(cell.mean)
     interval = ""
-    if cell is not None and cell.mean is not None and cell.std is not None:
-        low, high = fmt.number(cell.mean - cell.std), fmt.number(cell.mean + cell.std)
-        interval = f'<span class="interval">[{_e(low)}, {_e(high)}]</span>'
-        attrs["data-interval"] = f"{low} {high}"
+    bracket = table.interval_text(cell, fmt)
+    if bracket:
+        interval = f'<span class="interval">{_e(bracket)}</span>'
+    if cell is not None and cell.low is not None and cell.high is not None:
+        attrs["data-interval"] = f"{fmt.number(cell.low)} {fmt.number(cell.high)}"
+    text = table.cell_text(cell, fmt)
     row = table.rows[i]
     where = " ".join(v for v, h in zip(row, table.row_header, strict=True) if h)
     if sources:
@@ -296,7 +293,8 @@ def _provenance(published: PublishedTable) -> dict[tuple[RowKey, int], list[tupl
     rows = set(table.rows)
     out: dict[tuple[RowKey, int], list[tuple[ResultRecord, float | None]]] = defaultdict(list)
     for record in published.records:
-        alone = published.rebuild([record])
+        with without_intervals():  # each record's values only: no bootstrap per record
+            alone = published.rebuild([record])
         for i, row in enumerate(alone.rows):
             if row not in rows:
                 continue

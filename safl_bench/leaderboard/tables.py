@@ -17,10 +17,12 @@ import json
 import re
 from collections import defaultdict
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import pandas as pd
 
+from safl_bench.leaderboard import intervals
 from safl_bench.leaderboard.grouping import (
     Cell,
     TableKey,
@@ -29,6 +31,7 @@ from safl_bench.leaderboard.grouping import (
     format_seeds,
     seed_set,
 )
+from safl_bench.leaderboard.intervals import BEST, TIED
 from safl_bench.records import MODES, Metrics, ResultRecord
 
 MISSING = "—"
@@ -57,7 +60,11 @@ RowKey = tuple[str, str, str]  # (method, method version, matching mode or "")
 
 @dataclass
 class Table:
-    """A rendered-ready table: row labels, columns, one Cell (or None = missing) per position."""
+    """A rendered-ready table: row labels, columns, one Cell (or None = missing) per position.
+
+    `marks`: (row, column) -> `intervals.BEST` (bold: best beyond the noise) or `intervals.TIED`
+    (tied for best); `spread`: what a cell's bracket is ("bootstrap": the 95 % interval over
+    seeds and queries; "range": the lowest and highest of the seeds' values)."""
 
     title: str
     key: TableKey
@@ -68,49 +75,43 @@ class Table:
     cells: list[list[Cell | None]]
     seeds: frozenset[int]
     notes: list[str] = field(default_factory=list)
+    marks: dict[tuple[int, int], str] = field(default_factory=dict)
+    spread: str = "bootstrap"
 
     @property
     def heading(self) -> str:
         """The heading line: what the values are and which data they come from."""
         return f"{self.title} — {self.key.caption}"
 
-    def cell_text(self, cell: Cell | None, fmt: ValueFormat) -> str:
+    def value_text(self, cell: Cell | None, fmt: ValueFormat) -> str:
+        """The cell's mean as shown ('—' missing, 'n/a' undefined)."""
         if cell is None:
             return MISSING
         if cell.mean is None:
             return UNDEFINED
-        text = fmt.number(cell.mean)
-        if cell.std is not None:
-            text += f" ± {fmt.number(cell.std)}"
-        return text
+        return fmt.number(cell.mean)
 
-    def _best(self) -> set[tuple[int, int]]:
-        """Positions (row, column) of each column's best shown value per matching mode."""
-        best: set[tuple[int, int]] = set()
-        for j, fmt in enumerate(self.formats):
-            if fmt.better is None:
-                continue
-            by_group: dict[str, list[tuple[float, int]]] = defaultdict(list)
-            for i, row in enumerate(self.rows):
-                cell = self.cells[i][j]
-                if cell is not None and cell.mean is not None:
-                    by_group[row[2]].append((float(fmt.number(cell.mean)), i))
-            for entries in by_group.values():
-                if len(entries) < 2:
-                    continue
-                values = [v for v, _ in entries]
-                if len(set(values)) == 1:
-                    continue  # all equal: nothing stands out
-                target = max(values) if fmt.better == "higher" else min(values)
-                best.update((i, j) for v, i in entries if v == target)
-        return best
+    def interval_text(self, cell: Cell | None, fmt: ValueFormat) -> str:
+        """'[low, high]' of the cell, and its seeds when they are not the table's; '' if none."""
+        if cell is None or cell.mean is None:
+            return ""
+        parts = []
+        if cell.low is not None and cell.high is not None:
+            parts.append(f"[{fmt.number(cell.low)}, {fmt.number(cell.high)}]")
+        if cell.seeds and cell.seeds != self.seeds:
+            parts.append(f"(seed {format_seeds(cell.seeds)})")
+        return " ".join(parts)
+
+    def cell_text(self, cell: Cell | None, fmt: ValueFormat) -> str:
+        """The cell as the Markdown shows it: 'mean [low, high]' (and its seeds if its own)."""
+        interval = self.interval_text(cell, fmt)
+        return self.value_text(cell, fmt) + (f" {interval}" if interval else "")
 
     def markdown(self, level: int = 2) -> str:
         """The table as Markdown: heading, seeds line, table, notes."""
-        best = self._best()
         show_header = [h for h in self.row_header if h]
         lines = [f"{'#' * level} {self.heading}", ""]
-        lines.append(_seeds_sentence(self.seeds))
+        lines.append(seeds_sentence(self))
         lines.append("")
         lines.append("| " + " | ".join([*show_header, *map(_md, self.columns)]) + " |")
         lines.append("|" + "---|" * len(show_header) + "---:|" * len(self.columns))
@@ -119,7 +120,8 @@ class Table:
             values = []
             for j, fmt in enumerate(self.formats):
                 text = self.cell_text(self.cells[i][j], fmt)
-                values.append(f"**{text}**" if (i, j) in best else text)
+                mark = self.marks.get((i, j))
+                values.append(f"**{text}**" if mark == BEST else f"≈ {text}" if mark == TIED else text)
             lines.append("| " + " | ".join([*labels, *values]) + " |")
         if self.notes:
             lines.append("")
@@ -127,8 +129,8 @@ class Table:
         return "\n".join(lines) + "\n"
 
     def frame(self) -> pd.DataFrame:
-        """The table as a DataFrame of strings (CSV form): numbers without units, '' = missing."""
-        multi = len(self.seeds) > 1
+        """The table as a DataFrame of strings (CSV form): numbers without units, '' = missing;
+        each column's interval bounds beside it, and its cells' seeds where they differ."""
         data: dict[str, list[str]] = {
             "Source": [self.key.source_label] * len(self.rows),
             "Protocol": [self.key.protocol] * len(self.rows),
@@ -141,8 +143,12 @@ class Table:
         for j, (column, fmt) in enumerate(zip(self.columns, self.formats, strict=True)):
             cells = [self.cells[i][j] for i in range(len(self.rows))]
             data[column] = [_csv_value(c, fmt, "mean") for c in cells]
-            if multi:
-                data[f"{column} std"] = [_csv_value(c, fmt, "std") for c in cells]
+            data[f"{column} low"] = [_csv_value(c, fmt, "low") for c in cells]
+            data[f"{column} high"] = [_csv_value(c, fmt, "high") for c in cells]
+            if any(c is not None and c.seeds != self.seeds for c in cells):
+                data[f"{column} seeds"] = ["" if c is None else format_seeds(c.seeds) for c in cells]
+            if fmt.better is not None:
+                data[f"{column} rank"] = [self.marks.get((i, j), "") for i in range(len(self.rows))]
         data["Seeds"] = [format_seeds(self.seeds)] * len(self.rows)
         return pd.DataFrame(data)
 
@@ -159,18 +165,27 @@ def _csv_value(cell: Cell | None, fmt: ValueFormat, which: str) -> str:
     if cell is None:
         return ""
     if cell.mean is None:
-        return UNDEFINED
-    value = cell.mean if which == "mean" else cell.std
+        return UNDEFINED if which == "mean" else ""
+    value = {"mean": cell.mean, "low": cell.low, "high": cell.high}[which]
     return "" if value is None else fmt.number(value)
 
 
-def _seeds_sentence(seeds: frozenset[int]) -> str:
-    if len(seeds) == 1:
-        return f"Seed {format_seeds(seeds)}. Missing cells (not run) show {MISSING}."
-    return (
-        f"Mean ± sample standard deviation over seeds {format_seeds(seeds)}; a cell lacking any "
-        f"of these seeds shows {MISSING} (never an average over fewer runs)."
-    )
+def seeds_sentence(table: Table) -> str:
+    """What a cell's value and bracket are, and what bold and '≈' mean."""
+    seeds = format_seeds(table.seeds)
+    if table.spread == "range":
+        if len(table.seeds) == 1:
+            return f"Seed {seeds}. Missing cells (not run) show {MISSING}."
+        return (f"Mean over seeds {seeds} [lowest, highest of the seeds' records]; a cell with "
+                f"other seeds names them. Missing cells show {MISSING}.")
+    what = (f"Seed {seeds}: each value over its queries [95 % interval over the queries]"
+            if len(table.seeds) == 1 else
+            f"Mean over seeds {seeds} [95 % interval over seeds and queries]; a cell with other "
+            "seeds names them")
+    return (f"{what} (two-level block bootstrap, `safl_bench.uncertainty`). **Bold**: best of its "
+            "column and matching mode beyond the noise (the paired difference to every other "
+            "excludes 0); ≈: tied for best (not resolved). Missing cells (not run) show "
+            f"{MISSING}.")
 
 
 # --------------------------------------------------------------------------------------------
@@ -187,7 +202,19 @@ def _row_sort_key(row: RowKey) -> tuple[object, ...]:
     return (row[0], _version_key(row[1]), row[1], mode_rank, row[2])
 
 
-Extractor = Callable[[ResultRecord], Iterable[tuple[RowKey, str, float | None]]]
+class Value(NamedTuple):
+    """One record's value for one table position, and where its interval comes from: the
+    record's matching `mode` and the `uncertainty` measure name (None: no bootstrap; the
+    bracket is the seeds' range)."""
+
+    row: RowKey
+    column: str
+    value: float | None
+    mode: str = ""
+    measure: str | None = None
+
+
+Extractor = Callable[[ResultRecord], Iterable[Value]]
 
 
 def _build(
@@ -203,28 +230,63 @@ def _build(
 ) -> Table:
     seeds = seed_set(records)
     values: dict[tuple[RowKey, str], dict[int, float | None]] = defaultdict(dict)
+    sources: dict[tuple[RowKey, str], dict[int, ResultRecord]] = defaultdict(dict)
+    probe: dict[tuple[RowKey, str], tuple[str, str | None]] = {}
     for record in records:
-        for row, column, value in extract(record):
-            values[(row, column)][record.seed] = value
+        for v in extract(record):
+            values[(v.row, v.column)][record.seed] = v.value
+            sources[(v.row, v.column)][record.seed] = record
+            probe[(v.row, v.column)] = (v.mode, v.measure)
     rows = sorted({row for row, _ in values}, key=_row_sort_key)
-    cells = [[aggregate(values.get((row, c), {}), seeds) for c in columns] for row in rows]
-    gaps: dict[tuple[RowKey, tuple[int, ...]], list[str]] = defaultdict(list)
+    with_intervals = intervals.enabled()
+    bootstrapped = any(measure is not None for _, measure in probe.values())
+    cells: list[list[Cell | None]] = []
+    for row in rows:
+        line: list[Cell | None] = []
+        for column in columns:
+            cell = aggregate(values.get((row, column), {}))
+            if cell is not None and cell.mean is not None and with_intervals:
+                cell = _with_interval(cell, values[(row, column)],
+                                      list(sources[(row, column)].values()), *probe[(row, column)])
+            line.append(cell)
+        cells.append(line)
+    marks: dict[tuple[int, int], str] = {}
+    if with_intervals and bootstrapped:
+        for j, (column, fmt) in enumerate(zip(columns, formats, strict=True)):
+            if fmt.better is None:
+                continue
+            groups: dict[str, list[intervals.Ranked]] = defaultdict(list)
+            for i, row in enumerate(rows):
+                cell = cells[i][j]
+                if cell is None or cell.mean is None:
+                    continue
+                mode, measure = probe[(row, column)]
+                groups[row[2]].append(intervals.Ranked(
+                    i, cell.mean, float(fmt.number(cell.mean)),
+                    tuple(sources[(row, column)].values()), mode, measure))
+            for group in groups.values():
+                marks.update({(i, j): m for i, m in intervals.rank(group, fmt.better).items()})
+    own: dict[tuple[RowKey, tuple[int, ...]], list[str]] = defaultdict(list)
     for row in rows:
         for column in columns:
             have = values.get((row, column))
             if have and set(have) != seeds:
-                gaps[(row, tuple(sorted(seeds - set(have))))].append(column)
+                own[(row, tuple(sorted(have)))].append(column)
     all_notes = list(notes)
-    for (row, missing), cols in sorted(
-        gaps.items(), key=lambda kv: (_row_sort_key(kv[0][0]), kv[0][1])
-    ):
+    for (row, theirs), cols in sorted(own.items(), key=lambda kv: (_row_sort_key(kv[0][0]), kv[0][1])):
         label = " ".join(
             part for part in (row[0], f"v{row[1]}", MODE_LABELS.get(row[2], row[2])) if part
         )
         all_notes.append(
-            f"{label}: {', '.join(cols)} lack seed(s) {format_seeds(missing)}, so they show "
-            f"{MISSING}; run them to fill the cells."
+            f"{label}: {', '.join(cols)} over seed(s) {format_seeds(theirs)} only (the table's: "
+            f"{format_seeds(seeds)}); compared with other rows on the seeds both have; run the "
+            "missing seeds to fill them."
         )
+    if with_intervals and bootstrapped and any(
+            c is not None and c.mean is not None and c.low is None for line in cells for c in line):
+        all_notes.append("Cells without an interval come from records without per-query outcomes "
+                         "(metrics version 1): never marked best; `safl-bench run --force` "
+                         "recomputes them.")
     all_notes.extend(_matcher_notes(records))
     return Table(
         title=title,
@@ -236,7 +298,27 @@ def _build(
         cells=cells,
         seeds=seeds,
         notes=all_notes,
+        marks=marks,
+        spread="bootstrap" if bootstrapped else "range",
     )
+
+
+def _with_interval(cell: Cell, values: dict[int, float | None], records: list[ResultRecord],
+                   mode: str, measure: str | None) -> Cell:
+    """The cell with its bracket: the bootstrap interval of `measure` in `mode`, or with no
+    measure the seeds' range (several seeds) or nothing (one)."""
+    if measure is None:
+        finite = [v for v in values.values() if v is not None]
+        if len(finite) < 2:
+            return cell
+        return replace(cell, low=min(finite), high=max(finite))
+    sample = intervals.cell_sample(records, mode)
+    if sample is None:
+        return cell
+    iv = sample.intervals().get(measure)
+    if iv is None or iv.low != iv.low:
+        return cell
+    return replace(cell, low=iv.low, high=iv.high)
 
 
 def _matcher_notes(records: list[ResultRecord]) -> list[str]:
@@ -291,10 +373,10 @@ def paper_metric_table(
     get = _metric(metric)
     columns = condition_order(r.task.condition or "" for r in records)
 
-    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+    def extract(record: ResultRecord) -> Iterable[Value]:
         for mode, result in record.results.items():
             row = (record.method.name, record.method.version, mode)
-            yield row, record.task.condition or "", get(result.metrics)
+            yield Value(row, record.task.condition or "", get(result.metrics), mode, metric)
 
     table = _build(
         key,
@@ -332,11 +414,11 @@ def preset_table(key: TableKey, records: list[ResultRecord], *, metric: str = "r
     get = _metric(metric)
     columns = condition_order(r.task.condition or "" for r in records)
 
-    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+    def extract(record: ResultRecord) -> Iterable[Value]:
         result = record.results.get("sequence")
         if result is not None:
-            yield ((record.method.name, record.method.version, label(record.matcher)),
-                   record.task.condition or "", get(result.metrics))
+            yield Value((record.method.name, record.method.version, label(record.matcher)),
+                        record.task.condition or "", get(result.metrics), "sequence", metric)
 
     table = _build(key, records, title=title, row_header=("Method", "Version", "Matcher"),
                    columns=columns, formats=[RECALL_FORMAT] * len(columns), extract=extract, notes=notes)
@@ -364,9 +446,9 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
     """The paper's Table III: feature inference time per frame (ms, batch 1, median)."""
     columns = condition_order(r.task.condition or "" for r in records)
 
-    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+    def extract(record: ResultRecord) -> Iterable[Value]:
         row = (record.method.name, record.method.version, "")
-        yield row, record.task.condition or "", record.timings.describe_ms_per_frame
+        yield Value(row, record.task.condition or "", record.timings.describe_ms_per_frame)
 
     machines = sorted(
         {f"{r.environment.cpu_model} ({r.environment.cpu_cores} cores)" for r in records}
@@ -426,11 +508,12 @@ def sequence_table(key: TableKey, records: list[ResultRecord], metrics: tuple[Me
             columns.append(f"{sequence} {label}")
             formats.append(fmt)
 
-    def extract(record: ResultRecord) -> Iterable[tuple[RowKey, str, float | None]]:
+    def extract(record: ResultRecord) -> Iterable[Value]:
         for mode, result in record.results.items():
             row = (record.method.name, record.method.version, mode)
             for metric, label, _ in metrics:
-                yield row, f"{record.task.sequence} {label}", _metric(metric)(result.metrics)
+                yield Value(row, f"{record.task.sequence} {label}", _metric(metric)(result.metrics),
+                            mode, metric)
 
     table = _build(
         key,

@@ -1,0 +1,116 @@
+"""Intervals of leaderboard cells and the ranks of a column, beyond the noise.
+
+A cell is one (method, task, matching mode) over its seeds' records. Its interval is the 95 %
+two-level bootstrap interval of `safl_bench.uncertainty` (seeds and queries), computed once per
+cell and matching mode (`cell_sample`, cached for the build: the recall, AUC and Recall@1
+tables share it). Ranks:
+
+* **Best beyond the noise** (bold): the best mean of a column (within one matching mode), and
+  the paired difference to every other cell of the column excludes 0 (same task, so the same
+  queries; compared on the seeds both cells have).
+* **Tied for best** (marked "≈"): the best and every cell whose paired difference to it does
+  not exclude 0; also when a difference cannot be computed (records without per-query
+  outcomes, metrics version 1), since then nothing says the order is beyond the noise.
+
+With one seed the interval is over the queries alone (a fixed split, or a cell run once).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass
+
+from safl_bench.errors import DataError
+from safl_bench.records import ResultRecord, seed_outcomes
+from safl_bench.uncertainty import Interval, Sample, sample
+
+BEST, TIED = "best", "tied"
+
+_ENABLED: ContextVar[bool] = ContextVar("leaderboard_intervals", default=True)
+#: (id of each record, mode) -> (the records, kept so ids stay theirs; the sample or None)
+_CACHE: dict[tuple[object, ...], tuple[tuple[ResultRecord, ...], Sample | None]] = {}
+_CACHE_LIMIT = 8192
+
+
+@contextmanager
+def without_intervals() -> Iterator[None]:
+    """Build tables without intervals or ranks (the site's per-record rebuilds need the values
+    only; an interval per record would cost a bootstrap each)."""
+    token = _ENABLED.set(False)
+    try:
+        yield
+    finally:
+        _ENABLED.reset(token)
+
+
+def enabled() -> bool:
+    return _ENABLED.get()
+
+
+def cell_sample(records: Sequence[ResultRecord], mode: str) -> Sample | None:
+    """The bootstrap of one cell (its seeds' records, in seed order) in matching `mode`; None
+    when a record holds no per-query outcomes."""
+    ordered = tuple(sorted(records, key=lambda r: r.seed))
+    key = (mode, *(id(r) for r in ordered))
+    hit = _CACHE.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], ordered, strict=True)):
+        return hit[1]
+    outcomes = seed_outcomes(ordered, mode)
+    result = None if outcomes is None else sample(outcomes)
+    if len(_CACHE) >= _CACHE_LIMIT:
+        _CACHE.clear()
+    _CACHE[key] = (ordered, result)
+    return result
+
+
+@dataclass(frozen=True)
+class Ranked:
+    """One cell of a column, as `rank` needs it."""
+
+    index: int  # the caller's handle
+    mean: float
+    shown: float  # the mean as displayed (rounded): equal shown values are equal to a reader
+    records: tuple[ResultRecord, ...]
+    mode: str
+    measure: str | None  # the `uncertainty` measure name; None: no interval (no ranks)
+
+
+def _difference(a: Ranked, b: Ranked) -> Interval | None:
+    """a - b on the seeds both have, or None when it cannot be computed."""
+    if a.measure is None:
+        return None
+    shared = {r.seed for r in a.records} & {r.seed for r in b.records}
+    if not shared:
+        return None
+    sa = cell_sample([r for r in a.records if r.seed in shared], a.mode)
+    sb = cell_sample([r for r in b.records if r.seed in shared], b.mode)
+    if sa is None or sb is None:
+        return None
+    try:
+        return sa.minus(sb).get(a.measure)
+    except DataError:  # not scored on the same queries: nothing to pair
+        return None
+
+
+def rank(cells: Sequence[Ranked], better: str) -> dict[int, str]:
+    """{index: BEST or TIED} for the top of one column (module docstring); {} when fewer than
+    two cells have values or all show the same value."""
+    if len(cells) < 2 or len({c.shown for c in cells}) == 1:
+        return {}
+    sign = 1.0 if better == "higher" else -1.0
+    ordered = sorted(cells, key=lambda c: (-sign * c.shown, c.index))
+    top = ordered[0]
+    tied = []
+    for other in ordered[1:]:
+        if other.shown == top.shown:
+            tied.append(other)
+            continue
+        diff = _difference(top, other)
+        resolved = diff is not None and diff.excludes_zero() and sign * diff.mean > 0
+        if not resolved:
+            tied.append(other)
+    if not tied:
+        return {top.index: BEST}
+    return {c.index: TIED for c in (top, *tied)}
