@@ -276,12 +276,15 @@ class Interval:
     def format(self, scale: float = 1.0, decimals: int = 1) -> str:
         """'mean [low, high]' (values times `scale`); 'mean [n/a]' when the interval is
         undefined (a measure NaN in every replicate), 'n/a' when the mean is too."""
+        def number(value: float) -> str:
+            text = f"{value * scale:.{decimals}f}"
+            return text.lstrip("-") if float(text) == 0 else text  # no "-0.0"
+
         if self.mean != self.mean:
             return "n/a"
-        mean = f"{self.mean * scale:.{decimals}f}"
         if self.low != self.low:
-            return f"{mean} [n/a]"
-        return f"{mean} [{self.low * scale:.{decimals}f}, {self.high * scale:.{decimals}f}]"
+            return f"{number(self.mean)} [n/a]"
+        return f"{number(self.mean)} [{number(self.low)}, {number(self.high)}]"
 
 
 def _draws(n_seeds: int, rng: np.random.Generator, replicates: int) -> np.ndarray:

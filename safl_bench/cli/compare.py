@@ -16,7 +16,7 @@ from pathlib import Path
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.metrics import Outcomes
 from safl_bench.records import MODES, ResultRecord, default_results_dir, load_records
-from safl_bench.uncertainty import bootstrap, measure_names, paired_difference
+from safl_bench.uncertainty import measure_names, sample
 
 HELP = ("compare two methods task by task: means with 95 % intervals over seeds and queries, "
         "the paired difference and a verdict")
@@ -97,8 +97,8 @@ def main(args: argparse.Namespace) -> int:
                                     "(metrics version 1); recompute it with `safl-bench run --force`")
                 outcomes.append(result.queries.outcomes())
             sides.append(outcomes)
-        ia, ib = bootstrap(sides[0]), bootstrap(sides[1])
-        diff = paired_difference(sides[0], sides[1])
+        sa, sb = sample(sides[0]), sample(sides[1])  # one bootstrap per side, paired resamples
+        ia, ib, diff = sa.intervals(), sb.intervals(), sa.minus(sb)
         seeds = ", ".join(map(str, shared)) + (f" (not compared: {', '.join(map(str, only))})"
                                                if only else "")
         print(f"\n{task_id}  seeds {seeds}")
