@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from safl_bench.cli import main
 from safl_bench.mapbuild import build_views
 from safl_bench.mapconfig import bev_density_config
+
+from safl_bench.cli import main
 from safl_bench.sources import bev_source, kitti_source
+from safl_bench.views.render import build_views as render_views
 
 
 def test_export_round_trip(kitti_root: Path, safl_home: Path, tmp_path: Path,
@@ -27,7 +28,7 @@ def test_export_round_trip(kitti_root: Path, safl_home: Path, tmp_path: Path,
     np.testing.assert_allclose(bev.positions, kitti.positions, atol=1e-6)
     np.testing.assert_allclose(bev.headings, kitti.headings, atol=1e-6)
     np.testing.assert_allclose(bev.times, kitti.times)
-    views = bev_source(out).build_views("00", None, np.arange(12), {"c": None})["c", "topview"]
+    views = render_views(bev_source(out), "00", None, np.arange(12), {"c": None})["c", "topview"]
     expect = build_views(kitti, bev_density_config(), np.arange(12), {"c": None}, progress=False)["c", "topview"]
     np.testing.assert_array_equal(views, expect)  # the PNGs hold the views exactly
 

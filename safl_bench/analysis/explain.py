@@ -28,8 +28,7 @@ from typing import Any
 import numpy as np
 
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.evaluation import (
-    EvaluationConfig,
+from safl_bench.evaluation.cell import (
     difference_matrix,
     match_outcomes,
     score_matches,
@@ -37,12 +36,13 @@ from safl_bench.evaluation import (
     subset_result,
     subset_truth,
 )
-from safl_bench.matching import MatchResult, enhanced_matrix, match
-from safl_bench.method import Method, method_input
-from safl_bench.metrics import AMBIGUOUS, Metrics
-from safl_bench.metrics import CORRECT as CORRECT_LABEL
-from safl_bench.metrics import WRONG as WRONG_LABEL
-from safl_bench.records import ResultRecord, default_results_dir, load_record, record_path
+from safl_bench.evaluation.metrics import AMBIGUOUS, Metrics
+from safl_bench.evaluation.metrics import CORRECT as CORRECT_LABEL
+from safl_bench.evaluation.metrics import WRONG as WRONG_LABEL
+from safl_bench.matching.matcher import MatchResult, enhanced_matrix, match
+from safl_bench.matching.settings import EvaluationConfig
+from safl_bench.methods.method import Method, method_input
+from safl_bench.results.records import ResultRecord, default_results_dir, load_record, record_path
 
 #: Per-query outcome codes of `Explanation.status`.
 CORRECT, WRONG, BAND, NO_MATCH, NOT_SCORED = "correct", "wrong", "ambiguous band", "no match", "not scored"
@@ -104,8 +104,8 @@ def run_command(method: str, task_id: str, *, seed: int | None = None,
 def rebuild_method(record: ResultRecord) -> Method:
     """The method a record was made with: its parameters and the same weights (the shipped
     ones, the untrained networks, or the same file). ConfigError when that is not possible."""
-    from safl_bench.method_registry import make_method
-    from safl_bench.runner import method_info
+    from safl_bench.methods.method import make_method
+    from safl_bench.run.runner import method_info
 
     info = record.method.params
     params = dict(info.get("params", {}))
@@ -131,8 +131,8 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     """Recompute one cell from its record (see the module docstring). `options` is a
     `runner.RunOptions` (results directory, seed, data-source options, progress); a cell
     without a record is a DataError whose message is the run command that makes it."""
-    from safl_bench.method_registry import method_class
-    from safl_bench.runner import _task
+    from safl_bench.methods.method import method_class
+    from safl_bench.run.runner import _task
     from safl_bench.tasks.registry import runnable_spec
 
     registered = runnable_spec(task_id)  # an old synthetic task cannot be recomputed
@@ -205,7 +205,7 @@ def _source_flags(options: Any) -> dict[str, Any]:
 
 def summary(ex: Explanation) -> str:
     """A few lines for the terminal: the metric, and which wrong matches set it."""
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     rec = ex.record
     lines = [f"{rec.method.name}@{rec.method.version} on {rec.task.id} seed {rec.seed}, matcher "
@@ -246,7 +246,7 @@ def draw(ex: Explanation, out: str | Path, *, dpi: int = 80) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     out = Path(out)
     rec, cfg = ex.record, ex.config.sequence

@@ -2,7 +2,7 @@
 
 The real side is BEVPlace's published images of whole KITTI sequences (`--bev-root`); the
 synthetic side is a synthetic sequence rendered in the same encoding (`bev_density_config()`,
-which reproduces BEVPlace's images of real scans exactly; `safl_bench.bevdensity`). Both are
+which reproduces BEVPlace's images of real scans exactly; `safl_bench.views.bevdensity`). Both are
 compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
 
 - image statistics: the share of non-zero pixels, the mean non-zero value (in [0, 1]), and the
@@ -492,9 +492,9 @@ def place_recognition(
     the weights it picks for the synthetic default, on every task (unlike `safl-bench run`, which
     picks them by each task's source): their ranks compare the data alone, and their records say
     which weights they hold."""
-    from safl_bench.method_registry import make_method
-    from safl_bench.records import load_records
-    from safl_bench.runner import RunOptions, run_grid
+    from safl_bench.methods.method import make_method
+    from safl_bench.results.records import load_records
+    from safl_bench.run.runner import RunOptions, run_grid
     from safl_bench.tasks import spec
 
     tasks = [synthetic_task, *real_tasks]

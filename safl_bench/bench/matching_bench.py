@@ -1,9 +1,9 @@
 """Benchmark of the shared matcher: descriptors -> difference matrix -> SeqSLAM matches.
 
-``python -m safl_bench.matching_bench`` (or `main()`, for a CLI to wire up) prints the median
+``python -m safl_bench.bench.matching_bench`` (or `main()`, for a CLI to wire up) prints the median
 time and peak memory on a KITTI-00-sized problem (4541 x 4541 frames, 1024-d float32 random
 descriptors), the split between distance and matching, and the speed ratio against the plain-loop
-reference (`safl_bench.matching_loop`) on a smaller matrix. Target (issue 4): <= 1.5 s, < 2 GB.
+reference (`safl_bench.matching.loop`) on a smaller matrix. Target (issue 4): <= 1.5 s, < 2 GB.
 """
 
 from __future__ import annotations
@@ -14,7 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from . import distance, matching, matching_loop, timing
+from safl_bench.matching import loop as matching_loop
+from safl_bench.matching import matcher as matching
+from safl_bench.methods import distance
+from safl_bench.run import timing
 
 
 def run(n: int = 4541, dim: int = 1024, *, repeats: int = 5, loop_n: int = 100,
@@ -55,7 +58,7 @@ def run(n: int = 4541, dim: int = 1024, *, repeats: int = 5, loop_n: int = 100,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="safl_bench.matching_bench", description=__doc__)
+    ap = argparse.ArgumentParser(prog="safl_bench.bench.matching_bench", description=__doc__)
     ap.add_argument("--n", type=int, default=4541, help="frames in queries and database")
     ap.add_argument("--dim", type=int, default=1024, help="descriptor length")
     ap.add_argument("--repeats", type=int, default=5)
@@ -78,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"plain loop on {lr['n']} x {lr['n']}: {lr['loop_s']:.2f} s vs vectorised "
           f"{lr['vectorised_s'] * 1e3:.2f} ms -> {lr['ratio']:.0f}x")
     if args.json:
-        from .atomic import atomic_write_json
+        from safl_bench.common.atomic import atomic_write_json
 
         atomic_write_json(args.json, res)
     return 0

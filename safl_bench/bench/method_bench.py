@@ -21,9 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from safl_bench import timing
-from safl_bench.method import Method, method_input
-from safl_bench.method_registry import list_methods, make_method
+from safl_bench.methods.method import Method, list_methods, make_method, method_input
+from safl_bench.run import timing
 
 DEFAULT_TASK = "SAFL/Synth00-T0R0-v4"
 MATRIX_N = 4541
@@ -43,7 +42,7 @@ def timing_views(method: Method, views: Any) -> tuple[Any, str | None]:
     arr = np.asarray(views)
     if arr.shape[1:] == (size, size):
         return arr, None
-    from safl_bench.resample import fit_input
+    from safl_bench.views.resample import fit_input
 
     note = f"{arr.shape[1]}x{arr.shape[2]} views resampled to {size}x{size} for timing"
     return fit_input(arr, size), note
@@ -116,7 +115,7 @@ def run(
 ) -> list[dict[str, Any]]:
     """Figures for each method (default: every registered one), with the shipped weights where
     a method has them (timing does not depend on the weights' values)."""
-    from safl_bench.tasks.registry import make
+    from safl_bench.tasks.task import make
 
     names = list(methods) if methods else [info.name for info in list_methods()]
     task = make(task_id, progress=progress)

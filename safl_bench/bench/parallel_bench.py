@@ -18,9 +18,9 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from safl_bench import timing
+from safl_bench.common.parallel import Parallel
 from safl_bench.errors import ConfigError
-from safl_bench.parallel import Parallel
+from safl_bench.run import timing
 
 
 def _ray_available() -> bool:
@@ -46,13 +46,14 @@ def run(
     progress: bool = False,
 ) -> dict[str, Any]:
     """Every figure, JSON-ready. `root`: a KITTI-layout root holding `sequence`."""
-    from safl_bench import mapcache, runner
-    from safl_bench.mapbuild import select_frames
-    from safl_bench.mapconfig import MapConfig
-    from safl_bench.method_registry import make_method
-    from safl_bench.noise import CLEAN, PAPER_CONDITIONS
+    from safl_bench.methods.method import make_method
+    from safl_bench.run import runner
     from safl_bench.sources import kitti_source
     from safl_bench.tasks import register, registry, unregister
+    from safl_bench.views import mapcache
+    from safl_bench.views.mapbuild import select_frames
+    from safl_bench.views.mapconfig import MapConfig
+    from safl_bench.views.noise import CLEAN, PAPER_CONDITIONS
 
     if workers < 2:
         raise ConfigError(f"--workers must be >= 2 to compare with one worker, got {workers}")

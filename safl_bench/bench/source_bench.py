@@ -22,6 +22,7 @@ def run(root: str, sequence: str, *, repeats: int = 3, resolution_m: float = 0.4
     """Seconds to open and decode (cold) and to read back (cached) every image of `sequence`."""
     from safl_bench.paths import HOME_ENV
     from safl_bench.sources import bev_source
+    from safl_bench.views.render import build_views as render_views
 
     before = os.environ.get(HOME_ENV)
     cold: list[float] = []
@@ -40,7 +41,7 @@ def run(root: str, sequence: str, *, repeats: int = 3, resolution_m: float = 0.4
                 source.images(sequence, progress=False)
                 cached.append(time.perf_counter() - t0)
                 t0 = time.perf_counter()
-                source.build_views(sequence, None, np.arange(n), {"clean": None}, progress=False)
+                render_views(source, sequence, None, np.arange(n), {"clean": None}, progress=False)
                 views.append(time.perf_counter() - t0)
     finally:
         if before is None:

@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run the chosen benchmark and print its table."""
-    from safl_bench.atomic import atomic_write_json
+    from safl_bench.common.atomic import atomic_write_json
 
     if args.frames is None:
         args.frames = 8 if args.what == "bevplace" else 50
@@ -72,7 +72,7 @@ def main(args: argparse.Namespace) -> int:
     if args.what == "parallel":
         return _parallel(args)
     if args.what == "images":
-        from safl_bench import source_bench
+        from safl_bench.bench import source_bench
 
         if args.bev_root is None:
             raise ConfigError("bench images needs --bev-root DIR (top-view image folders)")
@@ -84,14 +84,14 @@ def main(args: argparse.Namespace) -> int:
     if args.what == "bevplace":
         return _bevplace(args)
     if args.what == "matcher":
-        from safl_bench import matching_bench
+        from safl_bench.bench import matching_bench
 
         argv = ["--n", str(args.n or 4541), "--repeats", str(args.repeats)]
         if args.json:
             argv += ["--json", args.json]
         return matching_bench.main(argv)
 
-    from safl_bench import method_bench
+    from safl_bench.bench import method_bench
 
     results = method_bench.run(
         args.method, task_id=args.task or method_bench.DEFAULT_TASK, frames=args.frames,
@@ -104,8 +104,8 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _parallel(args: argparse.Namespace) -> int:
-    from safl_bench import parallel_bench
-    from safl_bench.atomic import atomic_write_json
+    from safl_bench.bench import parallel_bench
+    from safl_bench.common.atomic import atomic_write_json
     from safl_bench.sources import resolve_source
 
     if args.step < 1:
@@ -124,7 +124,7 @@ def _parallel(args: argparse.Namespace) -> int:
 
 def _bevplace(args: argparse.Namespace) -> int:
     from baselines import bevplace_bench
-    from safl_bench.atomic import atomic_write_json
+    from safl_bench.common.atomic import atomic_write_json
 
     if args.batch_size < 1:
         raise ConfigError(f"--batch-size must be >= 1, got {args.batch_size}")

@@ -1,7 +1,7 @@
 """`safl-bench compare`: two methods on the same tasks, paired over the same seeds and queries.
 
 For each task it reads both methods' records (every seed both have), prints each measure's mean
-over those seeds with its 95 % interval for A, for B and for A - B (`safl_bench.uncertainty`:
+over those seeds with its 95 % interval for A, for B and for A - B (`safl_bench.evaluation.uncertainty`:
 a two-level block bootstrap over seeds and queries, the same resamples for both methods), and a
 one-line verdict: which measures A wins or loses beyond the noise, and which are tied.
 """
@@ -14,9 +14,9 @@ from collections import defaultdict
 from pathlib import Path
 
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.metrics import Outcomes
-from safl_bench.records import MODES, ResultRecord, default_results_dir, load_records
-from safl_bench.uncertainty import measure_names, sample
+from safl_bench.evaluation.metrics import Outcomes
+from safl_bench.evaluation.uncertainty import measure_names, sample
+from safl_bench.results.records import MODES, ResultRecord, default_results_dir, load_records
 
 HELP = ("compare two methods task by task: means with 95 % intervals over seeds and queries, "
         "the paired difference and a verdict")
@@ -72,7 +72,7 @@ def main(args: argparse.Namespace) -> int:
               file=sys.stderr)
     a, b = (_pick(records, m) for m in args.method)
     if args.task:
-        from safl_bench.runner import resolve_tasks
+        from safl_bench.run.runner import resolve_tasks
 
         wanted = resolve_tasks(args.task, source=args.source)
     else:

@@ -5,7 +5,7 @@
     DIR/SEQ/times.txt         its timestamp (s)
     DIR/SEQ/frames.txt        the scan each image was rendered from (with --step > 1 they differ)
 
-The default encoding is "bev-density" (`safl_bench.mapconfig.bev_density_config`), whose views
+The default encoding is "bev-density" (`safl_bench.views.mapconfig.bev_density_config`), whose views
 are BEVPlace's PNG values / 255, so the written images are what BEVPlace's pipeline makes of
 the scans and the folder reads back through the top-view image source (`--bev-root DIR`) and
 other tools for BEVPlace's layout. Other encodings are written as rint(255 * value); read them
@@ -23,11 +23,11 @@ import numpy as np
 
 from safl_bench.cli.options import seed
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.mapconfig import ENCODINGS
+from safl_bench.views.mapconfig import ENCODINGS
 
 if TYPE_CHECKING:
-    from safl_bench.mapconfig import MapConfig
     from safl_bench.sources import DataSource
+    from safl_bench.views.mapconfig import MapConfig
 
 HELP = ("write a scan sequence's top views (default: BEVPlace's BEV-density images) in BEVPlace's "
         "layout: DIR/SEQ/imgs/NNNNNN.png, pose.txt, times.txt")
@@ -72,7 +72,8 @@ def export_sequence(source: DataSource, name: str, config: MapConfig, out: Path,
     from PIL import Image
     from tqdm import tqdm
 
-    from safl_bench.mapbuild import select_frames
+    from safl_bench.views.mapbuild import select_frames
+    from safl_bench.views.render import build_views as render_views
 
     seq = source.sequence(name)
     frames = select_frames(len(seq), step)
@@ -82,7 +83,7 @@ def export_sequence(source: DataSource, name: str, config: MapConfig, out: Path,
     try:
         for lo in range(0, len(frames), CHUNK):
             chunk = frames[lo:lo + CHUNK]
-            views = source.build_views(name, config, chunk, {"clean": None}, ["topview"], progress=False)
+            views = render_views(source, name, config, chunk, {"clean": None}, ["topview"], progress=False)
             images = np.rint(np.asarray(views["clean", "topview"]) * 255.0).clip(0, 255).astype(np.uint8)
             for k, image in enumerate(images):
                 Image.fromarray(image, mode="L").save(folder / "imgs" / f"{lo + k:06d}.png")
@@ -98,8 +99,8 @@ def export_sequence(source: DataSource, name: str, config: MapConfig, out: Path,
 
 
 def main(args: argparse.Namespace) -> int:
-    from safl_bench.mapconfig import config_for_encoding
     from safl_bench.sources import resolve_source
+    from safl_bench.views.mapconfig import config_for_encoding
 
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")

@@ -2,7 +2,7 @@
 
 Renders a synthetic sequence (default 00) in the BEV-density encoding (BEVPlace's images of its
 scans, cached in the map cache), reads BEVPlace's images of the real sequences (`--bev-root`,
-default 00 and 02), and prints the statistics of `safl_bench.fidelity` side by side: image
+default 00 and 02), and prints the statistics of `safl_bench.analysis.fidelity` side by side: image
 statistics, the difficulty curves of SAD and of the rotation-invariant polar descriptor against
 distance (over all pairs, and over the pairs driving the same way) and heading difference, the
 envelope excess of the synthetic curves, and the place-recognition results of the top-view
@@ -97,7 +97,7 @@ def _xy(edges: list[float], values: list[float | None]) -> tuple[np.ndarray, lis
 def _plot(path: Path, measured: list[Any], synth_label: str, pr: dict[str, Any], tasks: list[str]) -> None:
     import matplotlib
 
-    from safl_bench.fidelity import LATERAL_BAND_M
+    from safl_bench.analysis.fidelity import LATERAL_BAND_M
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -153,17 +153,17 @@ def _plot_ranking(ax: Any, pr: dict[str, Any], tasks: list[str]) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from safl_bench import fidelity as F
-    from safl_bench import mapcache
-    from safl_bench.fingerprint import to_jsonable
-    from safl_bench.mapbuild import select_frames
-    from safl_bench.mapconfig import bev_density_config
-    from safl_bench.method_registry import list_methods
-    from safl_bench.noise import CLEAN
-    from safl_bench.records import default_results_dir
+    from safl_bench.analysis import fidelity as F
+    from safl_bench.common.fingerprint import to_jsonable
+    from safl_bench.methods.method import list_methods
+    from safl_bench.results.records import default_results_dir
     from safl_bench.sources import bev_source, synth_source
     from safl_bench.tasks import spec
     from safl_bench.tasks.builtin import revisit_id
+    from safl_bench.views import mapcache
+    from safl_bench.views.mapbuild import select_frames
+    from safl_bench.views.mapconfig import bev_density_config
+    from safl_bench.views.noise import CLEAN
 
     started = time.perf_counter()
     if args.step < 1:

@@ -13,9 +13,9 @@ import argparse
 
 import numpy as np
 
-from safl_bench.atomic import atomic_write_text
+from safl_bench.common.atomic import atomic_write_text
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.groundtruth import (
+from safl_bench.evaluation.groundtruth import (
     DEFAULT_PERIOD_S,
     camera_ground_positions,
     default_times,

@@ -6,9 +6,9 @@ import argparse
 
 from safl_bench.cli.options import add_parallel_arguments, parallel_from, seed
 from safl_bench.errors import ConfigError
-from safl_bench.mapbuild import DEFAULT_STEP, KINDS, select_frames
-from safl_bench.mapconfig import BACKENDS, ENCODINGS, MapConfig, config_for_encoding
-from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition
+from safl_bench.views.mapbuild import DEFAULT_STEP, KINDS, select_frames
+from safl_bench.views.mapconfig import BACKENDS, ENCODINGS, MapConfig, config_for_encoding
+from safl_bench.views.noise import CLEAN, PAPER_CONDITIONS, Condition
 
 HELP = "build and cache the top-view maps of sequences (synthetic default or --kitti-root)"
 
@@ -50,8 +50,8 @@ def parse_conditions(names: list[str]) -> list[Condition]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from safl_bench.mapcache import prepare_sequences
     from safl_bench.sources import resolve_source
+    from safl_bench.views.mapcache import prepare_sequences
 
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")

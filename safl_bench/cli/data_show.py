@@ -84,8 +84,8 @@ def draw_scan(ax, points: np.ndarray, title: str, extent: float = 40.0) -> None:
 
 def top_views(seq, frames: np.ndarray, config=None) -> np.ndarray:
     """Top views (F, H, W) of `frames` (default: the paper's occupancy maps, `MapConfig()`)."""
-    from safl_bench.mapbuild import build_views
-    from safl_bench.mapconfig import MapConfig
+    from safl_bench.views.mapbuild import build_views
+    from safl_bench.views.mapconfig import MapConfig
 
     views = build_views(seq, config or MapConfig(), frames, {"clean": None}, ["topview"], progress=False)
     return np.asarray(views["clean", "topview"])
@@ -117,8 +117,8 @@ def main(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from safl_bench.mapconfig import bev_density_config
     from safl_bench.sources.kitti import open_sequence
+    from safl_bench.views.mapconfig import bev_density_config
 
     name = str(args.sequence)
     if args.scans < 1 or args.scans > 8:

@@ -33,10 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from safl_bench.analysis.explain import draw, explain, summary
     from safl_bench.errors import ConfigError
-    from safl_bench.explain import draw, explain, summary
-    from safl_bench.records import default_results_dir
-    from safl_bench.runner import RunOptions
+    from safl_bench.results.records import default_results_dir
+    from safl_bench.run.runner import RunOptions
     from safl_bench.tasks import spec
 
     if args.top < 0:

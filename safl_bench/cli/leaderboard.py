@@ -16,8 +16,8 @@ from pathlib import Path
 
 from safl_bench.leaderboard import build_leaderboard
 from safl_bench.leaderboard.headline import update_readme
-from safl_bench.matcher_presets import label
-from safl_bench.records import Problem, ResultRecord, load_records
+from safl_bench.matching.presets import label
+from safl_bench.results.records import Problem, ResultRecord, load_records
 
 HELP = "regenerate the leaderboard (Markdown/CSV tables, PNG figures, web pages) from result records"
 

@@ -18,7 +18,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Print the presets, then one table: a row per setting, a column per preset."""
-    from safl_bench import matcher_presets as mp
+    from safl_bench.matching import presets as mp
 
     presets = [mp.get(name) for name in mp.names()]
     if args.json:
@@ -27,7 +27,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
     width = max(len(p.name) for p in presets)
     print("Matcher presets (safl-bench run --matcher-preset NAME; --matcher KEY=VALUE changes a "
-          "setting on top; where each value comes from: pydoc safl_bench.matcher_presets):")
+          "setting on top; where each value comes from: pydoc safl_bench.matching.presets):")
     for p in presets:
         print(f"  {p.name.ljust(width)}  {p.description}")
     print()

@@ -6,7 +6,7 @@ import argparse
 import json
 
 from safl_bench.cli.list_tasks import format_table
-from safl_bench.method_registry import list_methods, shipped_weights_path
+from safl_bench.methods.method import list_methods, shipped_weights_path
 
 HELP = "list the registered descriptor methods (name, version, input, origin)"
 

@@ -50,7 +50,7 @@ def seed_count(text: str) -> int:
 
 
 def add_parallel_arguments(parser: Any, what: str) -> None:
-    """--workers N and --ray ADDRESS (see `safl_bench.parallel`)."""
+    """--workers N and --ray ADDRESS (see `safl_bench.common.parallel`)."""
     parser.add_argument("--workers", type=int, default=1, metavar="N",
                         help=f"{what} in N local worker processes (default 1: in this process)")
     parser.add_argument("--ray", metavar="ADDRESS",
@@ -60,7 +60,7 @@ def add_parallel_arguments(parser: Any, what: str) -> None:
 
 def parallel_from(args: Any) -> Any:
     """The `Parallel` the options ask for."""
-    from safl_bench.parallel import Parallel
+    from safl_bench.common.parallel import Parallel
 
     return Parallel(workers=args.workers, ray_address=args.ray)
 

@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--matcher", action="append", default=[], metavar="KEY=VALUE",
-        help="sequence-matcher setting (safl_bench.matching.MatcherConfig), e.g. enhance_window=0 "
+        help="sequence-matcher setting (safl_bench.matching.matcher.MatcherConfig), e.g. enhance_window=0 "
         "or ds=5; repeatable; recorded with every result (default: the paper's Table I)",
     )
     parser.add_argument(
@@ -77,7 +77,7 @@ def matcher_config(score: str | None, items: list[str], preset: str = "paper") -
     """The evaluation's matcher settings (an `EvaluationConfig`): the preset (default: the
     paper's), then `--score` when given, then the `--matcher` pairs; an unknown preset or
     setting is a ConfigError naming the valid ones."""
-    from safl_bench import matcher_presets
+    from safl_bench.matching import presets as matcher_presets
 
     changes = parse_key_values(items, "--matcher")
     if score is not None:
@@ -99,9 +99,9 @@ def distinct_seeds(seeds: list[int]) -> list[int]:
 
 def main(args: argparse.Namespace) -> int:
     from safl_bench.errors import ConfigError
-    from safl_bench.method_registry import make_method, method_class
-    from safl_bench.records import default_results_dir
-    from safl_bench.runner import RunOptions, resolve_tasks, run_grid, summary_table
+    from safl_bench.methods.method import make_method, method_class
+    from safl_bench.results.records import default_results_dir
+    from safl_bench.run.runner import RunOptions, resolve_tasks, run_grid, summary_table
     from safl_bench.tasks import spec
 
     names = list(dict.fromkeys(args.method))

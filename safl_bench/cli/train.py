@@ -67,8 +67,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def default_val_tasks(source: str) -> list[str]:
     """Sequence 09 (KITTI or synthetic; 00 for the top-view images, which have no 09) at the
     default validation conditions."""
-    from safl_bench.noise import Condition
     from safl_bench.tasks.builtin import paper_id
+    from safl_bench.views.noise import Condition
 
     sequence = "00" if source == "bev" else "09"
     return [paper_id(source, sequence, Condition.parse(c)) for c in DEFAULT_VAL_CONDITIONS]
@@ -81,9 +81,9 @@ def validation_callback(task_ids: list[str], source_label: str, kitti_root: str 
     The task views are rendered (or read from the map cache) once, before training starts.
     The log keys are what the leaderboard's training-stability figure reads.
     """
-    from safl_bench.evaluation import evaluate_method
-    from safl_bench.method import method_input
-    from safl_bench.tasks.registry import make
+    from safl_bench.evaluation.cell import evaluate_method
+    from safl_bench.methods.method import method_input
+    from safl_bench.tasks.task import make
 
     tasks = []
     for task_id in task_ids:
@@ -106,9 +106,9 @@ def validation_callback(task_ids: list[str], source_label: str, kitti_root: str 
 def load_training_maps(source: Any, sequences: list[str], step: int, progress: bool) -> tuple[np.ndarray, dict[str, int]]:
     """Clean top-view maps of every `step`-th frame of `sequences`, concatenated (an image
     source's images as they are: the caller resamples them to the method's input size)."""
-    from safl_bench import mapcache
-    from safl_bench.mapconfig import MapConfig
-    from safl_bench.noise import CLEAN
+    from safl_bench.views import mapcache
+    from safl_bench.views.mapconfig import MapConfig
+    from safl_bench.views.noise import CLEAN
 
     config = None if source.kind == "bev" else MapConfig()
     parts, counts = [], {}
@@ -125,11 +125,11 @@ def main(args: argparse.Namespace) -> int:
     """Train, then write the weights, the encoder-only file, reconstructions and train.json."""
     import torch
 
-    from safl_bench import paths, provenance
-    from safl_bench.method import method_input
-    from safl_bench.method_registry import method_class
+    from safl_bench import paths
+    from safl_bench.methods.method import method_class, method_input
+    from safl_bench.methods.training import CHECKPOINT, AdversarialMethod, save_reconstructions
+    from safl_bench.results import provenance
     from safl_bench.sources import DataSource, bev_source, kitti_source, synth_source
-    from safl_bench.training import CHECKPOINT, AdversarialMethod, save_reconstructions
 
     cls = method_class(args.method)
     if not (cls.trainable and issubclass(cls, AdversarialMethod)):
@@ -195,8 +195,8 @@ def main(args: argparse.Namespace) -> int:
     method.save(out / f"{cls.name}.safetensors", parts=("encoder",))
     save_reconstructions(method, maps, out / "reconstructions.png")
 
-    from safl_bench.atomic import atomic_write_json
-    from safl_bench.training import data_fingerprint
+    from safl_bench.common.atomic import atomic_write_json
+    from safl_bench.methods.training import data_fingerprint
 
     env = provenance.collect_environment()
     atomic_write_json(out / "train.json", {

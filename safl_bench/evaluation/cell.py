@@ -7,7 +7,7 @@ each query to the database frames it may match (`GroundTruth.db_limit`). Single-
 also carry Recall@N (`RECALL_AT`), the retrieval literature's measure, from the same matrix.
 
 Two evaluation-level settings (`EvaluationConfig`; both off by default, the paper's protocol)
-reproduce the authors' public code (`safl_bench.matcher_presets`, preset "authors"):
+reproduce the authors' public code (`safl_bench.matching.presets`, preset "authors"):
 ``max_frames`` keeps only the first N of the task's frames on both sides (their ``test_len``),
 and ``trim_queries`` matches every query but leaves the first and last N out of the metrics
 (their PR curve starts ``ds + 10`` queries in). The matches keep every query either way.
@@ -17,16 +17,14 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.groundtruth import EXCLUDED, TP, GroundTruth
-from safl_bench.matching import MatcherConfig, MatchResult, match
-from safl_bench.method import Method
-from safl_bench.metrics import (
+from safl_bench.evaluation.groundtruth import EXCLUDED, TP, GroundTruth
+from safl_bench.evaluation.metrics import (
     RECALL_AT,
     Metrics,
     Outcomes,
@@ -34,84 +32,14 @@ from safl_bench.metrics import (
     outcomes,
     true_place_ranks,
 )
-
-#: The matching modes every evaluation reports, in the order tables show them.
-MODES = ("sequence", "single_frame")
-
-
-#: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
-EVALUATION_SETTINGS = ("max_frames", "trim_queries")
-
-
-@dataclass(frozen=True)
-class EvaluationConfig:
-    """The matcher settings of an evaluation (recorded with every result).
-
-    max_frames: use only the first N frames of the task (of its every-`step`-th frames) as
-    database AND queries (None: all). trim_queries: leave the first and the last N queries out
-    of the metrics (they are still matched, and their trajectories use their neighbours).
-    """
-
-    sequence: MatcherConfig = field(default_factory=MatcherConfig)
-    max_frames: int | None = None
-    trim_queries: int = 0
-
-    def __post_init__(self) -> None:
-        n = self.max_frames
-        if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
-            raise ConfigError(f"max_frames must be null (all frames) or an integer >= 1, got {n!r}")
-        t = self.trim_queries
-        if not isinstance(t, int) or isinstance(t, bool) or t < 0:
-            raise ConfigError(f"trim_queries must be an integer >= 0, got {t!r}")
-
-    @property
-    def single_frame(self) -> MatcherConfig:
-        """The no-sequence baseline (`matching.single_frame`'s settings: one frame, no contrast
-        enhancement), scored like the sequence matcher, except that the authors' capped 1/S
-        ("inverse", a quirk of their sequence matcher: on raw differences below 1 it would cap
-        every query and, with ``capped_match``, answer frame 1 for all) becomes "min", its
-        ranking without the quirks. The recorded ``single_frame`` settings say which."""
-        seq = self.sequence
-        if seq.score == "inverse":
-            return MatcherConfig(method="single_frame", ds=0, enhance_window=0, score="min",
-                                 ratio_window=seq.ratio_window, dtype=seq.dtype, preset=seq.preset)
-        return MatcherConfig(method="single_frame", ds=0, enhance_window=0, score=seq.score,
-                             ratio_window=seq.ratio_window, dtype=seq.dtype, shift=seq.shift,
-                             preset=seq.preset)
-
-    def matcher(self, mode: str) -> MatcherConfig:
-        return self.sequence if mode == "sequence" else self.single_frame
-
-    def to_dict(self) -> dict[str, Any]:
-        """What records store: each mode's matcher settings, and the evaluation-level ones."""
-        out: dict[str, Any] = {mode: self.matcher(mode).to_dict() for mode in MODES}
-        out["evaluation"] = {name: getattr(self, name) for name in EVALUATION_SETTINGS}
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> EvaluationConfig:
-        """The config a record's ``matcher`` field describes (`to_dict`'s inverse; the
-        single-frame settings follow from the sequence ones). A record made before a setting
-        existed is read with that setting's default, which is what its code did."""
-        if not isinstance(data, dict) or not isinstance(data.get("sequence"), dict):
-            raise ConfigError(f"matcher settings need a 'sequence' mapping, got {data!r}")
-        extra = data.get("evaluation", {})
-        if not isinstance(extra, dict) or set(extra) - set(EVALUATION_SETTINGS):
-            raise ConfigError(f"evaluation settings: expected keys of {list(EVALUATION_SETTINGS)}, "
-                              f"got {extra!r}")
-        return cls(MatcherConfig.from_dict(data["sequence"]), **extra)
-
-
-def same_settings(recorded: Any, wanted: dict[str, Any]) -> bool:
-    """Whether a record's ``matcher`` field holds the settings `wanted` (an
-    `EvaluationConfig.to_dict()`), reading settings the record predates as their defaults: a
-    record made before the presets existed is the "paper" preset. Never raises."""
-    if recorded == wanted:
-        return True
-    try:
-        return EvaluationConfig.from_dict(recorded).to_dict() == wanted
-    except (ConfigError, TypeError):
-        return False
+from safl_bench.matching.matcher import MatchResult, match
+from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they were defined here)
+    EVALUATION_SETTINGS,
+    MODES,
+    EvaluationConfig,
+    same_settings,
+)
+from safl_bench.methods.method import Method
 
 
 @dataclass
@@ -130,7 +58,7 @@ class Evaluation:
 def match_outcomes(truth: GroundTruth, result: MatchResult,
                    ranks: np.ndarray | None = None) -> Outcomes:
     """The label layer: each query's reported match labelled against the task's ground truth
-    (`safl_bench.metrics` defines what each label counts as). A match in the band between the
+    (`safl_bench.evaluation.metrics` defines what each label counts as). A match in the band between the
     true- and false-positive radii is ambiguous; a match to a frame the query may not match is
     wrong; a query the matcher could not answer (index -1) reported no match."""
     claimed = result.index >= 0
@@ -152,7 +80,7 @@ def describe(method: Method, views: Any) -> tuple[np.ndarray, float]:
     ask for it (`Method.cache_descriptors`; the seconds are then those measured when each view was
     described), else directly."""
     if getattr(method, "cache_descriptors", False) and method.input_kind == "topview":
-        from safl_bench.descriptor_cache import cached_describe
+        from safl_bench.methods.descriptor_cache import cached_describe
 
         desc, per_frame, _ = cached_describe(method, views)
         return desc, per_frame * len(desc)

@@ -5,7 +5,7 @@ Orientation: the matcher's score is LOWER = better; every measure here reads a C
 "no match", becomes -inf, "never accepted").
 
 What the measures read (`Outcomes`, one entry per scored query; the label layer that fills it
-is `safl_bench.evaluation.score_matches` on `safl_bench.groundtruth.GroundTruth`):
+is `safl_bench.evaluation.cell.score_matches` on `safl_bench.evaluation.groundtruth.GroundTruth`):
 
 * ``has_candidate``: the query may match at least one database frame (revisit protocol: some
   frame is older than the time window; paper and BEVPlace protocols: always). A query without a
@@ -60,7 +60,7 @@ The measures (each a fraction in [0, 1]; in a record's ``metrics``):
 
 Ties (one rule everywhere). Equal distances are ordered by the LOWER database index, in the
 matcher's precision (``MatcherConfig.dtype``, float32 by default): the matcher keeps the first
-minimum (`safl_bench.matching`), and `true_place_ranks` counts a candidate as nearer than the
+minimum (`safl_bench.matching.matcher`), and `true_place_ranks` counts a candidate as nearer than the
 true place when its distance is lower, or equal with a lower index, after converting the matrix
 to the same dtype. So ``recall_at_n["1"]`` equals the single-frame ``recall_at_1`` by
 construction. Tied confidences across queries are one threshold (above).
@@ -85,9 +85,10 @@ from typing import Any
 import numpy as np
 from sklearn.metrics import precision_recall_curve, roc_auc_score, roc_curve
 
-from .errors import ConfigError, DataError
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.matching.confidence import confidence_from_score  # noqa: F401  (re-exported)
 
-#: The version of these definitions; records store it (`safl_bench.records`).
+#: The version of these definitions; records store it (`safl_bench.results.records`).
 METRICS_VERSION = 2
 
 #: The N of the Recall@N that single-frame results report.
@@ -99,11 +100,6 @@ CORRECT, AMBIGUOUS, WRONG = 1, 0, -1
 
 class NoPositivesError(DataError):
     """No query has a true place: every recall is undefined."""
-
-
-def confidence_from_score(score: np.ndarray) -> np.ndarray:
-    """Matcher score (lower = better, +inf = no match) -> confidence (higher = better)."""
-    return -np.asarray(score, dtype=np.float64)
 
 
 def _clean(values: np.ndarray) -> list[float | None]:

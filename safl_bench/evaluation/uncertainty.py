@@ -6,7 +6,7 @@ Choices, and why:
 * **Two-level (hierarchical) bootstrap.** One replicate draws the cell's seeds with
   replacement (the query noise: a new seed is a new draw of the noise), then, for each drawn
   seed, resamples that seed's queries; the replicate's value is the mean over its drawn seeds of
-  the measure computed on the resampled queries, exactly as `safl_bench.metrics` defines it
+  the measure computed on the resampled queries, exactly as `safl_bench.evaluation.metrics` defines it
   (`measure_names`). With one seed (a fixed split, nothing random) only the queries are
   resampled. This is the standard nonparametric bootstrap for a two-stage sample (Davison &
   Hinkley 1997, §3.8): neither level alone gives the spread of a new run of the benchmark.
@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from safl_bench.errors import DataError
-from safl_bench.metrics import AMBIGUOUS, CORRECT, Outcomes
+from safl_bench.evaluation.metrics import AMBIGUOUS, CORRECT, Outcomes
 
 #: Replicates of the bootstrap, and the seed of its random numbers (deterministic intervals).
 REPLICATES = 1000
@@ -45,7 +45,7 @@ LEVEL = 0.95
 
 
 def measure_names() -> tuple[str, ...]:
-    """The measures `bootstrap` computes, named as in records (`safl_bench.records.Metrics`)."""
+    """The measures `bootstrap` computes, named as in records (`safl_bench.results.records.Metrics`)."""
     return ("recall_at_100_precision", "recall_at_100_precision_of_correct", "f1_max",
             "f1_max_of_correct", "extended_precision", "extended_precision_of_correct", "auc",
             "recall_at_1", "recall_at_5", "recall_at_10")
@@ -212,7 +212,7 @@ def _run_ends(sorted_keys: np.ndarray) -> np.ndarray:
 
 def _kernel_inputs(o: Outcomes) -> tuple[np.ndarray, ...]:
     """The masks and orders `_row` reads, over all of `o`'s queries (those without a candidate
-    are in no mask and no order: left out of every measure, as in `safl_bench.metrics`)."""
+    are in no mask and no order: left out of every measure, as in `safl_bench.evaluation.metrics`)."""
     scored = o.has_candidate
     claimed = scored & np.isfinite(o.confidence)
     correct = claimed & (o.label == CORRECT)
@@ -240,7 +240,7 @@ def _named(o: Outcomes, values: np.ndarray) -> dict[str, np.ndarray]:
 
 def weighted_measures(o: Outcomes, w: np.ndarray) -> dict[str, np.ndarray]:
     """Each measure of `measure_names` for every row of query weights `w` (R, N): the
-    definitions of `safl_bench.metrics` with query i counted w[r, i] times. NaN where a measure
+    definitions of `safl_bench.evaluation.metrics` with query i counted w[r, i] times. NaN where a measure
     is undefined for a replicate (no positive drawn; AUC with one class); Recall@5 and @10 only
     where the outcomes hold ranks. Compiled (`_row`, one pass over the queries per replicate)."""
     w = np.ascontiguousarray(w, dtype=np.float64)

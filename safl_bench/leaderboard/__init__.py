@@ -5,6 +5,7 @@
 `training_logs` (the logs behind the training-stability figure).
 """
 
-from safl_bench.leaderboard.build import BuildReport, build_leaderboard
+from safl_bench.leaderboard.build import build_leaderboard
+from safl_bench.leaderboard.report import BuildReport
 
 __all__ = ["BuildReport", "build_leaderboard"]

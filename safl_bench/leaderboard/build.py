@@ -29,11 +29,13 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
-from safl_bench.atomic import atomic_write_text
+from safl_bench.common.atomic import atomic_write_text
 from safl_bench.errors import DataError
+from safl_bench.evaluation.metrics import METRICS_VERSION
 from safl_bench.leaderboard import figures as figs
 from safl_bench.leaderboard.grouping import TableKey, group_records, slugify, table_key
 from safl_bench.leaderboard.headline import READING, facts_markdown
+from safl_bench.leaderboard.report import BuildReport, PublishedTable, headline_rank
 from safl_bench.leaderboard.tables import (
     F1_FORMAT,
     Table,
@@ -50,53 +52,18 @@ from safl_bench.leaderboard.tables import (
     time_table,
 )
 from safl_bench.leaderboard.training_logs import TrainingLog, load_training_logs
-from safl_bench.metrics import METRICS_VERSION
-from safl_bench.records import Problem, ResultRecord
+from safl_bench.results.records import Problem, ResultRecord
 
 GENERATED_DIRS = ("tables", "figures", "site")
 GENERATED_SUFFIXES = (".md", ".csv", ".png", ".html")
 UNKNOWN_SOURCE = "data source not recorded in the log"
-#: What every table showing a recall says about it (`safl_bench.metrics` defines each measure).
+#: What every table showing a recall says about it (`safl_bench.evaluation.metrics` defines each measure;
+#: the text names it by its old path, which still imports, so the committed tables stay byte-identical).
 RECALL_NOTE = (
     f"Recall is over the queries with a true place (the same for every method on a task: fixed "
     f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.metrics`); recall over "
     "correct matches (the paper's authors' and VPR-Bench's convention) is in the `_of_correct` "
     "columns of tables/all-results.csv.")
-
-
-@dataclass
-class PublishedTable:
-    """One table as the leaderboard wrote it, with what the web pages need to explain its cells.
-
-    `rebuild` is the function that made `table` from `records`: the site calls it on one record
-    at a time to learn which record (seed) gives which cell, so it never re-derives a column.
-    """
-
-    key: TableKey
-    label: str
-    md: str  # the Markdown file, relative to the leaderboard directory
-    table: Table
-    records: list[ResultRecord]
-    rebuild: Callable[[list[ResultRecord]], Table]
-
-
-@dataclass
-class BuildReport:
-    """What a regeneration wrote, removed and could not use."""
-
-    out_dir: Path
-    written: list[Path] = field(default_factory=list)
-    removed: list[Path] = field(default_factory=list)
-    problems: list[Problem] = field(default_factory=list)
-    headline: Table | None = None
-    #: the headline condition's measures that do not collapse on one false positive
-    headline_robust: list[Table] = field(default_factory=list)
-    #: the headline's records (its source, protocol, matcher presets and seeds are read from them)
-    headline_records: list[ResultRecord] = field(default_factory=list)
-    #: every table written, in the index's order, and the figures of each table group
-    tables: list[PublishedTable] = field(default_factory=list)
-    figure_links: dict[TableKey, list[tuple[str, str]]] = field(default_factory=dict)
-    training_figures: list[tuple[str, str, list[str]]] = field(default_factory=list)
 
 
 @dataclass
@@ -130,7 +97,7 @@ class _Writer:
 
 def _version_1_note(group: Sequence[ResultRecord]) -> list[str]:
     """A note naming the rows that come from metrics-version-1 records (kept because version 2
-    scores their task the same: `safl_bench.records.unchanged_by_version_2`)."""
+    scores their task the same: `safl_bench.results.records.unchanged_by_version_2`)."""
     old = sorted({f"{r.method.name} v{r.method.version}" for r in group if r.metrics_version == 1})
     if not old:
         return []
@@ -282,14 +249,6 @@ def build_leaderboard(
                                      problem_base=skipped_base)
     report.removed = _remove_stale(out, report.written)
     return report
-
-
-def headline_rank(key: TableKey) -> tuple[object, ...]:
-    """Headline = real data first (top-view images of KITTI, then KITTI scans, then the synthetic
-    default), the revisit protocol before the paper's, lowest sequence, newest version."""
-    kinds = ("bev", "kitti", "synth")
-    kind = kinds.index(key.source_kind) if key.source_kind in kinds else len(kinds)
-    return (kind, key.protocol != "revisit", key.source_label, key.sequence, -key.task_version)
 
 
 def _offer_headline(report: BuildReport, table: Table, robust: list[Table],

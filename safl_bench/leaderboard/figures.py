@@ -20,13 +20,13 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from safl_bench.atomic import atomic_write_with
+from safl_bench.common.atomic import atomic_write_with
 from safl_bench.errors import ConfigError
 from safl_bench.leaderboard.grouping import TableKey, condition_order
 from safl_bench.leaderboard.tables import MISSING, MODE_LABELS, Table
 from safl_bench.leaderboard.training_logs import TrainingLog
-from safl_bench.noise import Condition
-from safl_bench.records import MODES, ResultRecord
+from safl_bench.results.records import MODES, ResultRecord
+from safl_bench.views.noise import Condition
 
 DPI = 100
 _TRANSLATION_COLORS = {1.0: "tab:blue", 5.0: "tab:orange", 10.0: "tab:green", 20.0: "tab:red"}

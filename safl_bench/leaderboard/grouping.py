@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from safl_bench.errors import ConfigError
-from safl_bench.noise import PAPER_CONDITIONS, Condition
-from safl_bench.records import ResultRecord
+from safl_bench.results.records import ResultRecord
+from safl_bench.views.noise import PAPER_CONDITIONS, Condition
 
 
 @dataclass(frozen=True, order=True)

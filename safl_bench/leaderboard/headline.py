@@ -1,6 +1,6 @@
 """What the headline table is, said the same way in index.md, on the web page and in README.md.
 
-The headline (chosen by `build._headline_rank`) is read with four facts beside it, source,
+The headline (chosen by `report.headline_rank`) is read with four facts beside it, source,
 protocol, matcher preset and seeds, and one sentence on how to read recall at 100 % precision.
 `update_readme` rewrites the block between `README_START` and `README_END` in a README from the
 same table, so a regeneration keeps the README's numbers true.
@@ -13,11 +13,11 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from safl_bench.atomic import atomic_write_text
+from safl_bench.common.atomic import atomic_write_text
 from safl_bench.errors import DataError
 from safl_bench.leaderboard.grouping import format_seeds
 from safl_bench.leaderboard.tables import Table
-from safl_bench.records import ResultRecord
+from safl_bench.results.records import ResultRecord
 
 #: The one sentence a reader needs to read a headline cell.
 READING = (
@@ -35,7 +35,7 @@ README_END = "<!-- headline:end -->"
 
 def facts(table: Table, records: Sequence[ResultRecord]) -> list[tuple[str, str]]:
     """(name, value) of the source, protocol, matcher preset, seeds (and sequences) of `table`."""
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     key = table.key
     sequences = sorted({r.task.sequence for r in records})

@@ -1,7 +1,7 @@
 """Intervals of leaderboard cells and the ranks of a column, beyond the noise.
 
 A cell is one (method, task, matching mode) over its seeds' records. Its interval is the 95 %
-two-level bootstrap interval of `safl_bench.uncertainty` (seeds and queries), computed once per
+two-level bootstrap interval of `safl_bench.evaluation.uncertainty` (seeds and queries), computed once per
 cell and matching mode (`cell_sample`, cached for the build: the recall, AUC and Recall@1
 tables share it). Ranks:
 
@@ -23,8 +23,8 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 
 from safl_bench.errors import DataError
-from safl_bench.records import ResultRecord, seed_outcomes
-from safl_bench.uncertainty import Interval, Sample, sample
+from safl_bench.evaluation.uncertainty import Interval, Sample, sample
+from safl_bench.results.records import ResultRecord, seed_outcomes
 
 BEST, TIED = "best", "tied"
 

@@ -33,13 +33,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from safl_bench.atomic import atomic_write_text
-from safl_bench.leaderboard.build import BuildReport, PublishedTable, headline_rank
+from safl_bench.common.atomic import atomic_write_text
 from safl_bench.leaderboard.grouping import TableKey, slugify
 from safl_bench.leaderboard.headline import READING, facts
 from safl_bench.leaderboard.intervals import BEST, TIED, without_intervals
+from safl_bench.leaderboard.report import BuildReport, PublishedTable, headline_rank
 from safl_bench.leaderboard.tables import RowKey, Table, ValueFormat, seeds_sentence
-from safl_bench.records import Problem, ResultRecord, record_path
+from safl_bench.results.records import Problem, ResultRecord, record_path
 from safl_bench.sources import ROOT_OPTION
 
 SITE_DIR = "site"
@@ -306,7 +306,7 @@ def _provenance(published: PublishedTable) -> dict[tuple[RowKey, int], list[tupl
 
 
 def _preset(record: ResultRecord) -> str:
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     return label(record.matcher)
 

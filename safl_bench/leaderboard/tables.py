@@ -32,7 +32,7 @@ from safl_bench.leaderboard.grouping import (
     seed_set,
 )
 from safl_bench.leaderboard.intervals import BEST, TIED
-from safl_bench.records import MODES, Metrics, ResultRecord
+from safl_bench.results.records import MODES, Metrics, ResultRecord
 
 MISSING = "—"
 UNDEFINED = "n/a"
@@ -182,6 +182,8 @@ def seeds_sentence(table: Table) -> str:
             if len(table.seeds) == 1 else
             f"Mean over seeds {seeds} [95 % interval over seeds and queries]; a cell with other "
             "seeds names them")
+    # `safl_bench.uncertainty`: the module's old path (it still imports), kept in the published text
+    # so that the committed tables regenerate byte for byte
     return (f"{what} (two-level block bootstrap, `safl_bench.uncertainty`). **Bold**: best of its "
             "column and matching mode beyond the noise (the paired difference to every other "
             "excludes 0); ≈: tied for best (not resolved). Missing cells (not run) show "
@@ -322,7 +324,7 @@ def _with_interval(cell: Cell, values: dict[int, float | None], records: list[Re
 
 
 def _matcher_notes(records: list[ResultRecord]) -> list[str]:
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     configs = sorted({json.dumps(r.matcher, sort_keys=True) for r in records})
     labels = sorted({label(r.matcher) for r in records})
@@ -409,7 +411,7 @@ def preset_table(key: TableKey, records: list[ResultRecord], *, metric: str = "r
     """Rows = (method, version, matcher preset), columns = noise conditions, values = `metric` of
     the sequence matcher: how much of a Table II cell comes from the matcher's variant. `records`
     may hold several presets' records of one task (from separate results folders)."""
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     get = _metric(metric)
     columns = condition_order(r.task.condition or "" for r in records)
@@ -565,7 +567,7 @@ def _label_modes(table: Table) -> Table:
 
 def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
     """Every record and matching mode as one row with all metrics and timings (long format)."""
-    from safl_bench.matcher_presets import label
+    from safl_bench.matching.presets import label
 
     rows = []
     for r in sorted(records, key=lambda rec: rec.key):

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from safl_bench.records import Problem
+from safl_bench.results.records import Problem
 
 LOG_NAME = "train_log.jsonl"
 

@@ -1,6 +1,6 @@
 """Plain-loop reference implementation of the matcher's equations (slow: O(Nq Ndb V ds)).
 
-Written independently of the vectorised kernels in `safl_bench.matching`, straight from the
+Written independently of the vectorised kernels in `safl_bench.matching.matcher`, straight from the
 definitions in its module docstring; the tests check that both agree and the benchmark reports the
 speed ratio. Not for real use.
 """
@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .matching import MatcherConfig
+from safl_bench.matching.matcher import MatcherConfig
 
 
 def ref_enhance(D: np.ndarray, window: int, mode: str) -> np.ndarray:

@@ -3,11 +3,11 @@ single-frame baseline, vectorised (numba kernels, parallel over queries).
 
 Orientation: the input difference matrix ``D`` has shape (Nq, Ndb), row = query frame, column =
 database frame, LOWER = more similar. ``MatchResult.score`` is also lower = better; metrics want a
-confidence (higher = better) and get it from `safl_bench.metrics.confidence_from_score`, the one
+confidence (higher = better) and get it from `safl_bench.matching.confidence.confidence_from_score`, the one
 place where the sign is flipped (``MatchResult.confidence`` calls it).
 
 Definition followed (the paper's, with the choices it leaves open written down). The defaults
-are the paper's; `safl_bench.matcher_presets` names whole sets of these settings ("paper",
+are the paper's; `safl_bench.matching.presets` names whole sets of these settings ("paper",
 "authors": the authors' public code, "openseqslam") and says where each value comes from.
 
 1. Local contrast enhancement (Eq. 5), along the database axis, per query row ``i``::
@@ -41,7 +41,7 @@ are the paper's; `safl_bench.matcher_presets` names whole sets of these settings
    this is the paper's sum divided by the constant ``ds + 1`` (same ranking), and it keeps
    shortened trajectories (below) on the same scale. ``S(T, j) = min_V S(T, j, V)``, and the
    match of ``T`` is ``argmin_j S(T, j)`` (ties: lowest velocity, then lowest ``j``: the
-   one tie rule of `safl_bench.metrics`, which its Recall@N ranks follow in the same dtype).
+   one tie rule of `safl_bench.evaluation.metrics`, which its Recall@N ranks follow in the same dtype).
 3. Velocities: ``V_min, V_min + V_step, ..., V_max`` computed as ``round(V_min + k V_step, 9)``
    (no accumulated steps). The paper's Table I lists V from 0.8 to 1.1 by 0.1, four velocities,
    so ``V_max`` is included (``v_inclusive=True``, default). The authors' public code
@@ -74,7 +74,7 @@ are the paper's; `safl_bench.matcher_presets` names whole sets of these settings
    points lie at lower j anyway. Enhancement still uses whole rows. A query with no candidate
    gets index -1 and score +inf.
 
-``preset`` names the preset the settings started from (`safl_bench.matcher_presets`); it is
+``preset`` names the preset the settings started from (`safl_bench.matching.presets`); it is
 recorded with the other settings and changes no match. Differences from the authors' code that
 are NOT settings (no result here depends on them): a window with zero spread gives 0 here, NaN
 there; a query with no trajectory inside the database gets no match here, frame ds/2 with
@@ -93,7 +93,8 @@ from typing import Any, Literal
 import numba
 import numpy as np
 
-from .errors import ConfigError, DataError
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.matching.confidence import confidence_from_score
 
 ScoreKind = Literal["min", "ratio", "inverse"]
 SCORES = ("min", "ratio", "inverse")
@@ -233,9 +234,7 @@ class MatchResult:
 
     @property
     def confidence(self) -> np.ndarray:
-        """Higher = more confident, for the metrics (see metrics.confidence_from_score)."""
-        from .metrics import confidence_from_score
-
+        """Higher = more confident, for the metrics (`confidence.confidence_from_score`)."""
         return confidence_from_score(self.score)
 
     def to_dict(self) -> dict[str, Any]:

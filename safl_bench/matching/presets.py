@@ -7,7 +7,7 @@ name into every record) and the evaluation-level settings. Every record holds al
 settings; `label` names them for tables ("paper", "authors+enhance_window=0").
 
 ``paper`` - the paper as printed: Table I (d_s = 10; V from 0.8 to 1.1 by 0.1) and Eq. 5-7
-(`safl_bench.matching`, whose docstring says how each gap is filled: the contrast-enhancement
+(`safl_bench.matching.matcher`, whose docstring says how each gap is filled: the contrast-enhancement
 window of 10 frames, centred, is OpenSeqSLAM's, since the paper gives none). These are the
 `MatcherConfig` defaults, unchanged since before the presets.
 
@@ -78,8 +78,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from safl_bench.errors import ConfigError
-from safl_bench.evaluation import EVALUATION_SETTINGS, EvaluationConfig
-from safl_bench.matching import MatcherConfig
+from safl_bench.matching.matcher import MatcherConfig
+from safl_bench.matching.settings import EVALUATION_SETTINGS, EvaluationConfig
 
 #: The preset a run uses when none is named.
 DEFAULT = "paper"

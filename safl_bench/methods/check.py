@@ -2,7 +2,7 @@
 
 Meant for plug-in authors' own test suites as much as for ours::
 
-    from safl_bench.check import check_method
+    from safl_bench.methods.check import check_method
 
     def test_my_method_conforms():
         check_method(MyMethod(small_config=True))
@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from safl_bench.errors import SaflError
-from safl_bench.method import INPUT_KINDS, Method
+from safl_bench.methods.method import INPUT_KINDS, Method
 
 CHECKS: tuple[str, ...] = (
     "attributes",
@@ -102,10 +102,10 @@ def check_method(
     """
     if isinstance(method, type):
         if not issubclass(method, Method):
-            _fail("attributes", f"{method!r} is not a subclass of safl_bench.method.Method")
+            _fail("attributes", f"{method!r} is not a subclass of safl_bench.methods.method.Method")
         method = method()
     if not isinstance(method, Method):
-        _fail("attributes", f"{method!r} is not a safl_bench.method.Method instance")
+        _fail("attributes", f"{method!r} is not a safl_bench.methods.method.Method instance")
     cls = type(method)
     label = f"{cls.__name__} ({method.name!r})"
 

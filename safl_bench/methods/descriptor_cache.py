@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from safl_bench.atomic import atomic_path
-from safl_bench.fingerprint import fingerprint
-from safl_bench.method import Method
+from safl_bench.common.atomic import atomic_path
+from safl_bench.common.fingerprint import fingerprint
+from safl_bench.methods.method import Method
 from safl_bench.paths import home
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import DataError
+from safl_bench.errors import DataError
 
 _DTYPES = {"float32": np.float32, "float64": np.float64}
 

@@ -12,7 +12,7 @@ subclass adds; a subclass implements `build_networks`, `build_optimizers` and `t
   thread count, which the tests check; `torch.use_deterministic_algorithms` is not switched on
   because on this torch it imports the inductor compiler (5 s) and changes nothing on the CPU;
 * after every epoch, when `checkpoint_dir` is given, atomically writes `last.safetensors` (all
-  networks + flattened optimizer states; scalars as JSON metadata; see `safl_bench.weights`)
+  networks + flattened optimizer states; scalars as JSON metadata; see `safl_bench.methods.weights`)
   and `log.jsonl` (one JSON object per epoch: mean losses, steps, seconds, and whatever
   `callback(epoch, method)` returns, e.g. a validation AUC);
 * resumes from `last.safetensors` when it exists (same parameters and data required), so
@@ -36,11 +36,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from safl_bench.atomic import atomic_write_text
+from safl_bench.common.atomic import atomic_write_text
+from safl_bench.common.fingerprint import fingerprint
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.fingerprint import fingerprint
-from safl_bench.method import Method, Views, as_topview
-from safl_bench.weights import (
+from safl_bench.methods.method import Method, Views, as_topview
+from safl_bench.methods.weights import (
     load_module_tensors,
     load_optimizer_tensors,
     load_tensors,
@@ -342,7 +342,7 @@ def save_reconstructions(method: AdversarialMethod, maps: Views, path: str | Pat
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from safl_bench.atomic import atomic_path
+    from safl_bench.common.atomic import atomic_path
 
     arr = as_topview(maps)
     if len(arr) == 0:

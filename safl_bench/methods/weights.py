@@ -20,9 +20,9 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import save_file
 
-from safl_bench.atomic import atomic_write_with
+from safl_bench.common.atomic import atomic_write_with
+from safl_bench.common.fingerprint import to_jsonable
 from safl_bench.errors import DataError
-from safl_bench.fingerprint import to_jsonable
 
 METADATA_KEY = "safl_bench"
 

@@ -12,7 +12,7 @@ a key, has a value of the wrong type or a non-finite number raises `CorruptRecor
 the file, so callers report it and recompute instead of using it.
 
 Every record says which definitions of the measures made it (``metrics_version``, see
-`safl_bench.metrics`; records without it are version 1). Since version 2 a record also holds
+`safl_bench.evaluation.metrics`; records without it are version 1). Since version 2 a record also holds
 each query's outcome (``results.<mode>.queries``: confidence, label, true place, candidate,
 rank of the nearest true place), so `rescore` recomputes its measures under newer definitions
 from what it holds. `load_records` rescores such records and reports the older ones it cannot
@@ -34,14 +34,14 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
-from safl_bench.atomic import atomic_write_text
+from safl_bench.common.atomic import atomic_write_text
+from safl_bench.common.fingerprint import to_jsonable
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.fingerprint import to_jsonable
-from safl_bench.metrics import METRICS_VERSION, RECALL_AT, Outcomes, evaluate_outcomes
-from safl_bench.provenance import Environment, collect_environment
+from safl_bench.evaluation.metrics import METRICS_VERSION, RECALL_AT, Outcomes, evaluate_outcomes
+from safl_bench.results.provenance import Environment, collect_environment
 
 if TYPE_CHECKING:
-    from safl_bench.metrics import Metrics as Evaluation
+    from safl_bench.evaluation.metrics import Metrics as Evaluation
     from safl_bench.tasks.spec import TaskSpec
 
 SCHEMA_VERSION = 1
@@ -101,7 +101,7 @@ class TaskInfo:
 
 @dataclass(frozen=True)
 class Metrics:
-    """The measures of one matching mode, as `safl_bench.metrics` defines them (its table
+    """The measures of one matching mode, as `safl_bench.evaluation.metrics` defines them (its table
     gives each one's formula and denominator). Rates are fractions in [0, 1]; None where
     undefined (auc with one class only) or not measured by the record's metrics version.
 
@@ -127,7 +127,7 @@ class Metrics:
 
 @dataclass(frozen=True)
 class QueryOutcomes:
-    """Each scored query's outcome (`safl_bench.metrics.Outcomes` as JSON): what the measures
+    """Each scored query's outcome (`safl_bench.evaluation.metrics.Outcomes` as JSON): what the measures
     read, so that they can be recomputed from the record. confidence: None = no match
     reported; label: 1 correct, 0 ambiguous, -1 wrong; has_true_place, has_candidate: 0 or 1;
     true_rank: rank of the nearest true place (0 = none), single-frame mode only."""
@@ -224,7 +224,7 @@ class ResultRecord:
     environment: Environment
     created: str  # UTC, ISO 8601
     schema: int = SCHEMA_VERSION
-    #: the version of `safl_bench.metrics` that scored it (a file without one is version 1)
+    #: the version of `safl_bench.evaluation.metrics` that scored it (a file without one is version 1)
     metrics_version: int = METRICS_VERSION
 
     @property
@@ -296,7 +296,7 @@ def make_mode_result(
 
 def mode_result_from_evaluation(evaluation: Evaluation,
                                 outcomes: Outcomes | None = None) -> ModeResult:
-    """A ModeResult from `safl_bench.metrics.evaluate`'s output (curves downsampled) and the
+    """A ModeResult from `safl_bench.evaluation.metrics.evaluate`'s output (curves downsampled) and the
     per-query `outcomes` it was computed from."""
     return make_mode_result(
         Metrics(
@@ -330,7 +330,7 @@ class OutdatedRecordError(DataError):
 
 def seed_outcomes(records: Sequence[ResultRecord], mode: str) -> list[Outcomes] | None:
     """Each record's per-query outcomes in matching mode `mode` (the records: the seeds of one
-    cell), for intervals and paired comparisons (`safl_bench.uncertainty`); None when a record
+    cell), for intervals and paired comparisons (`safl_bench.evaluation.uncertainty`); None when a record
     holds none (metrics version 1) or lacks the mode."""
     out = []
     for record in records:

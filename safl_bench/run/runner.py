@@ -23,12 +23,13 @@ from typing import Any
 
 import numpy as np
 
+from safl_bench.common.parallel import JobResult, Parallel, run_jobs
 from safl_bench.errors import ConfigError, SaflError
-from safl_bench.evaluation import MODES, EvaluationConfig, evaluate_method, same_settings
-from safl_bench.method import Method, input_note, method_input
-from safl_bench.metrics import METRICS_VERSION, NoPositivesError
-from safl_bench.parallel import JobResult, Parallel, run_jobs
-from safl_bench.records import (
+from safl_bench.evaluation.cell import evaluate_method
+from safl_bench.evaluation.metrics import METRICS_VERSION, NoPositivesError
+from safl_bench.matching.settings import MODES, EvaluationConfig, same_settings
+from safl_bench.methods.method import Method, input_note, method_input
+from safl_bench.results.records import (
     CorruptRecordError,
     EvaluatedCell,
     MethodInfo,
@@ -47,12 +48,12 @@ from safl_bench.records import (
     write_evaluated,
     write_record,
 )
+from safl_bench.run.timing import pinned, time_describe
 from safl_bench.sources import ROOT_OPTION
 from safl_bench.tasks import registry, spec, suite
 from safl_bench.tasks.registry import runnable_spec
 from safl_bench.tasks.spec import TaskSpec
 from safl_bench.tasks.task import Task, prepare_tasks
-from safl_bench.timing import pinned, time_describe
 
 
 @dataclass(frozen=True)
@@ -180,7 +181,7 @@ def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool,
     run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
     encoding = getattr(method, "view_encoding", None)
     if encoding and run_spec.map_config is not None and run_spec.map_config.encoding != encoding:
-        from safl_bench.mapconfig import config_for_encoding
+        from safl_bench.views.mapconfig import config_for_encoding
 
         run_spec = dataclasses.replace(run_spec, map_config=config_for_encoding(encoding))
     return Task.from_spec(run_spec, kitti_root=options.kitti_root, bev_root=options.bev_root,
@@ -505,11 +506,11 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     matcher preset, then recall at 100 % precision beside the measures that do not collapse on
     one confident false positive (F1max, Recall@1, AUC) of the sequence matcher, then
     single-frame matching, each as its mean over the seeds and 95 % interval over seeds and
-    queries (`safl_bench.uncertainty`); ms/frame as the median over the seeds' records and
+    queries (`safl_bench.evaluation.uncertainty`); ms/frame as the median over the seeds' records and
     their range. A method column only when there are several; a failed seed gets its own row."""
-    from safl_bench.matcher_presets import label
-    from safl_bench.records import seed_outcomes
-    from safl_bench.uncertainty import bootstrap
+    from safl_bench.evaluation.uncertainty import bootstrap
+    from safl_bench.matching.presets import label
+    from safl_bench.results.records import seed_outcomes
 
     by_method = len({o.method for o in outcomes}) > 1
     lead = ("method",) if by_method else ()

@@ -27,8 +27,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from . import provenance
-from .errors import ConfigError, DataError
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.results import provenance
 
 
 class Describes(Protocol):
@@ -290,7 +290,7 @@ def time_matcher(
     warmup: int = 1,
 ) -> Timing:
     """Matcher time on a difference matrix (per_item_ms is per query)."""
-    from .matching import MatcherConfig, match
+    from safl_bench.matching.matcher import MatcherConfig, match
 
     cfg = config or MatcherConfig()
     t = time_call(lambda: match(D, cfg), name=f"match[{cfg.method}]", repeats=repeats,

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.sources.base import DataSource
@@ -21,10 +21,22 @@ from safl_bench.sources.bev import BEV_ROOT_ENV, DEFAULT_RESOLUTION_M, BevSource
 from safl_bench.sources.kitti import KittiSource, kitti_source
 from safl_bench.sources.synth import SynthSource, synth_source
 
-if TYPE_CHECKING:
-    from safl_bench.tasks.spec import TaskSpec
-
 KINDS = ("synth", "kitti", "bev")
+
+
+class SourceSpec(Protocol):
+    """What `open_source` reads of a task's spec (`safl_bench.tasks.spec.TaskSpec` has it; the
+    tasks come after the sources, so this stage names only the fields)."""
+
+    @property
+    def id(self) -> str: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def data_seed(self) -> int: ...
+    @property
+    def sequence(self) -> str: ...
+
 #: The option that points each real source at its data (for error messages).
 ROOT_OPTION = {"kitti": "--kitti-root DIR", "bev": "--bev-root DIR"}
 
@@ -63,7 +75,7 @@ def resolve_source(
     return synth_source(seed, sequences, progress=progress)
 
 
-def open_source(spec: TaskSpec, *, kitti_root: str | None = None, bev_root: str | None = None,
+def open_source(spec: SourceSpec, *, kitti_root: str | None = None, bev_root: str | None = None,
                 bev_resolution_m: float = DEFAULT_RESOLUTION_M, progress: bool = True) -> DataSource:
     """The data source a task spec names: the embedded default (generated on first use), the
     KITTI root (`kitti_root`, else $SAFL_KITTI_ROOT) or the top-view images (`bev_root`, else

@@ -1,14 +1,15 @@
 """`DataSource`: the interface every data source implements (KITTI scans, the synthetic default,
 top-view image folders; one file each in this package).
 
-A source opens sequences by name and renders the views that tasks read:
+A source opens sequences by name and says how its views are made; the views stage renders them
+(`safl_bench.views.render.build_views`), so that this stage needs nothing of a later one:
 
 * `sequence(name)` (opened once) has `positions` (n, 2) ground-plane metres, `times` (n,) s and
   `len()`: all that tasks and ground truth need;
 * `fingerprint(name)` is a cheap digest of the sequence's files for cache keys (no file is hashed
   in full: KITTI is 80 GB);
-* `build_views(name, config, frames, offsets, kinds)` renders the views of `frames` for each set
-  of viewpoint offsets (see `safl_bench.mapbuild.build_views` for the shapes);
+* `renders` says what its views are made from: "scans" (sliding local maps of LiDAR scans,
+  `sequence(name)` being a `KittiSequence`) or "images" (top-view images, `images(name)`);
 * `view_kinds` says which views it can render (an image folder has no points), `cache_views`
   whether rendered views are worth keeping in the map cache (re-rendering from scans is slow;
   resampling an image is not), and `notes(name)` what a record must say about the data (e.g.
@@ -17,7 +18,6 @@ A source opens sequences by name and renders the views that tasks read:
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Protocol
@@ -60,6 +60,8 @@ class DataSource:
     kind: ClassVar[str] = ""
     view_kinds: ClassVar[tuple[str, ...]] = ("topview", "points")
     cache_views: ClassVar[bool] = True
+    #: what the views are made from: "scans" (local maps of LiDAR scans) or "images"
+    renders: ClassVar[str] = "scans"
 
     def sequence(self, name: str) -> Any:
         """Open (once) and return sequence `name`."""
@@ -88,10 +90,3 @@ class DataSource:
                 f"{', '.join(self.view_kinds)}; run point-cloud methods on KITTI scans "
                 "(--kitti-root) or on the synthetic default"
             )
-
-    def build_views(
-        self, name: str, config: Any, frames: np.ndarray, offsets: Mapping[str, np.ndarray | None],
-        kinds: Sequence[str] = ("topview",), progress: bool = True,
-    ) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
-        """Views of `frames` of sequence `name` for each named set of viewpoint offsets."""
-        raise NotImplementedError

@@ -20,7 +20,7 @@ Choices, and why:
 - The views are the images themselves, as float32 = value / 255. There are no points: methods
   that read local-map points get a one-line error. Viewpoint noise (the paper protocol) cannot
   re-render anything, so noisy queries are the images resampled to the moved viewpoint
-  (`safl_bench.resample.move_viewpoint`: nearest neighbour, what comes from outside the image
+  (`safl_bench.views.resample.move_viewpoint`: nearest neighbour, what comes from outside the image
   is empty).
 - The decoded images of a whole sequence are cached once, uncompressed uint8, under the map
   cache (`<home>/maps/bev-<seq>/images-<key>.npy`), keyed by the size and modification time of
@@ -32,16 +32,16 @@ Choices, and why:
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
-from safl_bench.atomic import atomic_path
+from safl_bench.common.atomic import atomic_path
+from safl_bench.common.fingerprint import fingerprint
 from safl_bench.errors import DataError
-from safl_bench.fingerprint import fingerprint
 from safl_bench.sources.base import DataSource, file_stat
 from safl_bench.sources.kitti import read_pose_lines, read_times
 
@@ -154,6 +154,7 @@ class BevSource(DataSource):
     kind: ClassVar[str] = "bev"
     view_kinds: ClassVar[tuple[str, ...]] = ("topview",)
     cache_views: ClassVar[bool] = False
+    renders: ClassVar[str] = "images"
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.resolution_m) or self.resolution_m <= 0:
@@ -199,27 +200,6 @@ class BevSource(DataSource):
                         np.save(fh, images)
             seq._images = images
         return seq._images
-
-    def build_views(
-        self, name: str, config: Any, frames: np.ndarray, offsets: Mapping[str, np.ndarray | None],
-        kinds: Sequence[str] = ("topview",), progress: bool = True,
-    ) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
-        from safl_bench.mapbuild import check_frames
-        from safl_bench.resample import move_viewpoint
-
-        for kind in kinds:
-            self.check_kind(kind)
-        frames = check_frames(frames, len(self.sequence(name)), name)
-        steps = np.diff(frames)
-        if len(frames) > 1 and steps[0] > 0 and (steps == steps[0]).all():  # a view: no copy
-            images = self.images(name, progress=progress)[frames[0]:frames[-1] + 1:steps[0]]
-        else:
-            images = self.images(name, progress=progress)[frames]
-        out: dict[tuple[str, str], np.ndarray | list[np.ndarray]] = {}
-        for label, offset in offsets.items():
-            moved = images if offset is None else move_viewpoint(images, offset, self.resolution_m)
-            out[label, "topview"] = moved.astype(np.float32) / np.float32(255.0)
-        return out
 
 
 def bev_source(root: str | Path, resolution_m: float = DEFAULT_RESOLUTION_M) -> BevSource:

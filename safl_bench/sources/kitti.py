@@ -19,15 +19,14 @@ from __future__ import annotations
 
 import contextlib
 import io
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
+from safl_bench.common.fingerprint import fingerprint
 from safl_bench.errors import DataError
-from safl_bench.fingerprint import fingerprint
 from safl_bench.sources.base import DataSource, file_stat
 
 POINT_BYTES = 16  # float32 x, y, z, reflectance
@@ -230,7 +229,7 @@ class KittiSource(DataSource):
 
     Its fingerprint covers the root path, the sizes and modification times of poses/calib/times
     and the number of scans; views are rendered from sliding local maps of the scans
-    (`safl_bench.mapbuild`)."""
+    (`safl_bench.views.mapbuild`, through `safl_bench.views.render`)."""
 
     kind: ClassVar[str] = "kitti"
 
@@ -251,14 +250,6 @@ class KittiSource(DataSource):
     def fingerprint(self, name: str) -> str:
         name = str(name)
         return fingerprint("kitti", str(self.root.resolve()), name, self.file_stats(name))
-
-    def build_views(
-        self, name: str, config: Any, frames: np.ndarray, offsets: Mapping[str, np.ndarray | None],
-        kinds: Sequence[str] = ("topview",), progress: bool = True,
-    ) -> dict[tuple[str, str], np.ndarray | list[np.ndarray]]:
-        from safl_bench.mapbuild import build_views
-
-        return build_views(self.sequence(name), config, frames, offsets, kinds, progress=progress)
 
 
 def kitti_source(root: str | Path) -> KittiSource:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from safl_bench.fingerprint import fingerprint
+from safl_bench.common.fingerprint import fingerprint
 from safl_bench.sources.kitti import KittiSource
 
 

@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 
 from safl_bench import paths
-from safl_bench.atomic import atomic_write_json
+from safl_bench.common.atomic import atomic_write_json
+from safl_bench.common.fingerprint import to_jsonable
 from safl_bench.errors import DataError
-from safl_bench.fingerprint import to_jsonable
 from safl_bench.synth import writer
 from safl_bench.synth.config import (
     ALL_SEQUENCES,

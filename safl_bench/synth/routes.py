@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from safl_bench.common.loops import loop_pairs
 from safl_bench.errors import ConfigError
 from safl_bench.synth.streets import StreetGrid
 from safl_bench.synth.world import LANE_OFFSET_M
@@ -303,8 +304,6 @@ def revisit_kinds(positions: np.ndarray, headings: np.ndarray, times: np.ndarray
 
     `radius` defaults to 5 m because opposite lanes are ~3 m apart.
     """
-    from safl_bench.groundtruth import loop_pairs
-
     pairs = loop_pairs(positions, times, radius, min_gap_s)
     same = np.zeros(len(positions), dtype=bool)
     opposite = np.zeros(len(positions), dtype=bool)

@@ -6,7 +6,7 @@
     <root>/poses/XX.txt                       3x4 camera-0 poses, first one identity
     <root>/sequences/XX/synth_manifest.json   how it was made; written last (not KITTI)
 
-Every file goes through `safl_bench.atomic`, so an interrupted run leaves no partial file.
+Every file goes through `safl_bench.common.atomic`, so an interrupted run leaves no partial file.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from safl_bench.atomic import atomic_write_bytes, atomic_write_text
+from safl_bench.common.atomic import atomic_write_bytes, atomic_write_text
 
 MANIFEST_NAME = "synth_manifest.json"
 

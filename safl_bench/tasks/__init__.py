@@ -10,8 +10,9 @@ streaming environment (`gymnasium.make(task_id)` after `import safl_bench`).
 from __future__ import annotations
 
 from safl_bench.tasks.builtin import SUITES, register_builtin, suite
-from safl_bench.tasks.registry import make, register, registry, spec, unregister
+from safl_bench.tasks.registry import register, registry, spec, unregister
 from safl_bench.tasks.spec import TaskSpec
+from safl_bench.tasks.task import make
 
 register_builtin()
 

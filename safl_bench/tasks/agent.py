@@ -23,11 +23,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from safl_bench.errors import ConfigError
-from safl_bench.matching import MatcherConfig, match
+from safl_bench.matching.matcher import MatcherConfig, match
 
 
 class Descriptor(Protocol):
-    """What the agent needs of a method (`safl_bench.method.Method` has both)."""
+    """What the agent needs of a method (`safl_bench.methods.method.Method` has both)."""
 
     def describe(self, maps: Any) -> np.ndarray: ...
 
@@ -50,7 +50,7 @@ class MatcherAgent:
 
     def _input(self, maps: np.ndarray) -> Any:
         """Maps at the method's input size (`method_input`) when it is a `Method`."""
-        from safl_bench.method import Method, method_input
+        from safl_bench.methods.method import Method, method_input
 
         return method_input(self.method, maps) if isinstance(self.method, Method) else maps
 

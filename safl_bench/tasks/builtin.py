@@ -18,7 +18,7 @@ the revisit protocol on 00, 02, 05 and 06; BEVPlace's own protocol (`-BEVPlace-v
 within 5 m, scored by Recall@1); and the paper's twelve conditions on 00, whose noisy queries
 are the images resampled to the moved viewpoint (there are no points to re-render: nearest
 neighbour, what comes from outside the image is empty; at T20 up to a third of a 60.4 m wide
-view along the shift, see `safl_bench.resample`).
+view along the shift, see `safl_bench.views.resample`).
 
 Synthetic tasks are at task version v4, on synthetic data version "5" (`SYNTH_DATA_VERSIONS`);
 their v0, v1, v2 and v3, on data versions "1", "2", "3" and "4", stay registered so that their
@@ -31,10 +31,10 @@ Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
 from __future__ import annotations
 
 from safl_bench.errors import RegistryError
-from safl_bench.mapconfig import MapConfig
-from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition
 from safl_bench.tasks.registry import register
 from safl_bench.tasks.spec import TaskSpec
+from safl_bench.views.mapconfig import MapConfig
+from safl_bench.views.noise import CLEAN, PAPER_CONDITIONS, Condition
 
 NAMESPACE = "SAFL"
 PAPER_STEP = 4

@@ -33,7 +33,7 @@ import numpy as np
 from gymnasium import spaces
 
 from safl_bench.errors import ConfigError
-from safl_bench.groundtruth import EXCLUDED, TP
+from safl_bench.evaluation.groundtruth import EXCLUDED, TP
 from safl_bench.tasks.task import Task
 
 LABELS = {TP: "tp", EXCLUDED: "excluded", -1: "fp"}
@@ -56,7 +56,7 @@ class TaskEnv(gymnasium.Env):
         if task is None:
             if task_id is None:
                 raise ConfigError("TaskEnv needs a task id or a Task")
-            from safl_bench.tasks.registry import make
+            from safl_bench.tasks.task import make
 
             task = make(task_id, kitti_root=kitti_root, bev_root=bev_root, progress=progress)
         self.task = task

@@ -1,4 +1,6 @@
-"""The task registry, modelled on Gymnasium's: `register`, `spec`, `make`, `registry`.
+"""The task registry, modelled on Gymnasium's: `register`, `spec`, `registry` (and `make`, in
+`safl_bench.tasks.task` beside the `Task` it builds, so that the two modules do not import each
+other; `safl_bench.tasks.make` is the one users call).
 
 Ids are versioned (`SAFL/Synth00-T1R1-v4`). An id without its version resolves to the latest
 registered version, with a warning naming it; an old version still resolves (old records stay
@@ -14,14 +16,10 @@ from __future__ import annotations
 import difflib
 import warnings
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from safl_bench.errors import ConfigError, RegistryError
 from safl_bench.tasks.spec import TaskSpec, current_synth_data_version, make_id, parse_id
-
-if TYPE_CHECKING:
-    from safl_bench.sources import DataSource
-    from safl_bench.tasks.task import Task
 
 #: All registered tasks by id (read it; change it through `register` / `unregister`).
 registry: dict[str, TaskSpec] = {}
@@ -133,28 +131,3 @@ def runnable_spec(task_id: str) -> TaskSpec:
     found = spec(task_id)
     check_data_version(found)
     return found
-
-
-def make(
-    task_id: str,
-    *,
-    kitti_root: str | None = None,
-    bev_root: str | None = None,
-    bev_resolution_m: float | None = None,
-    source: DataSource | None = None,
-    progress: bool = True,
-) -> Task:
-    """Materialise a task: open its data source and sequence, select frames, build ground truth.
-
-    Views (top-view maps or points) are rendered or read from the map cache on first access
-    (`task.database(kind)`, `task.queries(kind)`, or all at once with `task.prepare(...)`).
-    `source` overrides the source the spec names (it must be of the same kind); otherwise KITTI
-    tasks take `kitti_root` or $SAFL_KITTI_ROOT, top-view image tasks `bev_root` or
-    $SAFL_BEV_ROOT (at `bev_resolution_m` metres per pixel, default 0.4) and synthetic tasks the
-    embedded default. A synthetic task on other synthetic data than this safl-bench generates
-    raises ConfigError (`check_data_version`).
-    """
-    from safl_bench.tasks.task import Task
-
-    return Task.from_spec(runnable_spec(task_id), kitti_root=kitti_root, bev_root=bev_root,
-                          bev_resolution_m=bev_resolution_m, source=source, progress=progress)

@@ -18,10 +18,10 @@ import re
 from dataclasses import dataclass, field
 from typing import Any
 
+from safl_bench.common.fingerprint import fingerprint, to_jsonable
 from safl_bench.errors import ConfigError
-from safl_bench.fingerprint import fingerprint, to_jsonable
-from safl_bench.mapconfig import MapConfig
-from safl_bench.noise import CLEAN, Condition
+from safl_bench.views.mapconfig import MapConfig
+from safl_bench.views.noise import CLEAN, Condition
 
 #: Bump when the code that turns a spec into data or ground truth changes meaning; it enters every
 #: fingerprint, so records made before the change are told apart from those made after it.
@@ -82,7 +82,7 @@ class TaskSpec:
     step: every `step`-th frame (0, step, 2*step, ...) is used as database and query frame.
     database_frames, query_frames: [start, stop) frame ranges of the database and the queries
         (protocol "bevplace" only; every `step`-th frame of each range).
-    seed: seed of the viewpoint noise (`safl_bench.noise.sample_offsets`): the first of the
+    seed: seed of the viewpoint noise (`safl_bench.views.noise.sample_offsets`): the first of the
         task's noise seeds.
     n_seeds: how many noise seeds a cell of the task averages (`seeds`, from `seed` on); None:
         `DEFAULT_NOISY_SEEDS` where the queries are drawn with noise (the paper protocol under a

@@ -21,13 +21,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.groundtruth import GroundTruth
-from safl_bench.mapbuild import select_frames
-from safl_bench.noise import CLEAN, sample_offsets
+from safl_bench.evaluation.groundtruth import GroundTruth
+from safl_bench.tasks.registry import check_data_version, runnable_spec
 from safl_bench.tasks.spec import TaskSpec
+from safl_bench.views.mapbuild import select_frames
+from safl_bench.views.noise import CLEAN, sample_offsets
 
 if TYPE_CHECKING:
-    from safl_bench.parallel import Parallel
+    from safl_bench.common.parallel import Parallel
     from safl_bench.sources import DataSource
 
 KINDS = ("topview", "points")
@@ -109,8 +110,6 @@ class Task:
     ) -> Task:
         """Open the spec's data source and sequence (or `source`, of the same kind); a synthetic
         task on other synthetic data than this safl-bench generates is a ConfigError."""
-        from safl_bench.tasks.registry import check_data_version
-
         check_data_version(spec)
         if source is None:
             from safl_bench.sources import DEFAULT_RESOLUTION_M, open_source
@@ -172,7 +171,7 @@ class Task:
 
     def prepare(self, kinds: Sequence[str] = ("topview",)) -> None:
         """Render every view the task needs in one pass over the scans (then cached on disk)."""
-        from safl_bench import mapcache
+        from safl_bench.views import mapcache
 
         for kind in kinds:
             self._check_kind(kind)
@@ -209,7 +208,7 @@ class Task:
         if (role, kind) not in self._views:
             if self.source is None:
                 raise DataError(f"task {self.spec.id} was built from arrays without {kind} views")
-            from safl_bench import mapcache
+            from safl_bench.views import mapcache
 
             self.prepare([kind])  # database and queries in one pass over the scans
             condition = CLEAN if role == "database" else self.spec.condition
@@ -247,8 +246,8 @@ def prepare_tasks(tasks: Sequence[Task], kinds: Sequence[str] = ("topview",), *,
     share one pass for all their conditions, instead of one pass each; with `parallel`, each
     pass runs in chunks on the workers (`mapcache.prepare`). Returns {index in `tasks`: why its
     views could not be rendered}; the other tasks' views are cached."""
-    from safl_bench import mapcache
     from safl_bench.errors import SaflError
+    from safl_bench.views import mapcache
 
     groups: dict[tuple[Any, ...], tuple[DataSource, Task, list[Any], list[int]]] = {}
     failed: dict[int, str] = {}
@@ -275,3 +274,26 @@ def prepare_tasks(tasks: Sequence[Task], kinds: Sequence[str] = ("topview",), *,
         except SaflError as exc:
             failed.update((i, str(exc)) for i in members)
     return failed
+
+
+def make(
+    task_id: str,
+    *,
+    kitti_root: str | None = None,
+    bev_root: str | None = None,
+    bev_resolution_m: float | None = None,
+    source: DataSource | None = None,
+    progress: bool = True,
+) -> Task:
+    """Materialise a task: open its data source and sequence, select frames, build ground truth.
+
+    Views (top-view maps or points) are rendered or read from the map cache on first access
+    (`task.database(kind)`, `task.queries(kind)`, or all at once with `task.prepare(...)`).
+    `source` overrides the source the spec names (it must be of the same kind); otherwise KITTI
+    tasks take `kitti_root` or $SAFL_KITTI_ROOT, top-view image tasks `bev_root` or
+    $SAFL_BEV_ROOT (at `bev_resolution_m` metres per pixel, default 0.4) and synthetic tasks the
+    embedded default. A synthetic task on other synthetic data than this safl-bench generates
+    raises ConfigError (`check_data_version`).
+    """
+    return Task.from_spec(runnable_spec(task_id), kitti_root=kitti_root, bev_root=bev_root,
+                          bev_resolution_m=bev_resolution_m, source=source, progress=progress)

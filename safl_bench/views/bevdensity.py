@@ -38,7 +38,7 @@ x forward, y left, z up, origin at the sensor):
    OpenCV rounds half to even when it writes the float image as 8-bit, as `np.rint` does). So
    the float view is exactly the PNG's value / 255, and an image without any count is all zero.
 
-The pipeline (`safl_bench.mapbuild.build_views`) pools the raw points of the last `window`
+The pipeline (`safl_bench.views.mapbuild.build_views`) pools the raw points of the last `window`
 scans (1: BEVPlace renders single scans) in the world frame and renders them from each
 viewpoint; viewpoint noise moves the viewpoint (the sensor pose composed with the planar offset
 dx forward, dy left, dtheta about the sensor's z), and the voxel grid moves with it, as if the
@@ -54,7 +54,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from safl_bench.errors import ConfigError
-from safl_bench.mapconfig import MapConfig
+from safl_bench.views.mapconfig import MapConfig
 
 #: Counts per pixel are clipped here (BEVPlace's script and its published images).
 DENSITY_CAP = 10

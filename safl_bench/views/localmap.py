@@ -34,7 +34,7 @@ import numba
 import numpy as np
 
 from safl_bench.errors import ConfigError
-from safl_bench.mapconfig import MapConfig, logodds
+from safl_bench.views.mapconfig import MapConfig, logodds
 
 _OFF = 1 << 20  # voxel index offset: 21 bits per axis, +-2^20 voxels
 _MASK = (1 << 21) - 1

@@ -5,7 +5,7 @@ requested frame needs are read. At each requested frame every requested conditio
 (the robot pose moved by that condition's seeded offset) is rendered, for every requested kind,
 from the same map, so many conditions cost one pass over the scans.
 
-The "bev-density" encoding (BEVPlace's images, `safl_bench.bevdensity`) counts raw points, not
+The "bev-density" encoding (BEVPlace's images, `safl_bench.views.bevdensity`) counts raw points, not
 local-map voxels: its top views are rendered from the raw points of the same window of scans
 (kept as read, with their poses), each viewpoint being the current scan's pose moved by the
 condition's offset; the local map is then only built when points views are requested.
@@ -19,12 +19,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from tqdm import tqdm
 
-from safl_bench.bevdensity import density_views
 from safl_bench.errors import ConfigError
-from safl_bench.localmap import make_local_map
-from safl_bench.mapconfig import MapConfig
 from safl_bench.sources.kitti import KittiSequence
-from safl_bench.topview import encode, noisy_viewpoints, pose_viewpoint, render, view_points
+from safl_bench.views.bevdensity import density_views
+from safl_bench.views.localmap import make_local_map
+from safl_bench.views.mapconfig import MapConfig
+from safl_bench.views.topview import encode, noisy_viewpoints, pose_viewpoint, render, view_points
 
 KINDS = ("topview", "points")
 #: Default frame step for tasks: the paper's authors' public code used every 4th frame.

@@ -28,15 +28,16 @@ from typing import Any
 
 import numpy as np
 
-from safl_bench.atomic import atomic_path
+from safl_bench.common.atomic import atomic_path
+from safl_bench.common.fingerprint import fingerprint, to_jsonable
+from safl_bench.common.parallel import JobResult, Parallel, run_jobs
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.fingerprint import fingerprint, to_jsonable
-from safl_bench.mapbuild import KINDS, check_frames
-from safl_bench.mapconfig import MapConfig
-from safl_bench.noise import Condition, sample_offsets
-from safl_bench.parallel import JobResult, Parallel, run_jobs
 from safl_bench.paths import map_cache_dir
 from safl_bench.sources import DataSource
+from safl_bench.views.mapbuild import KINDS, check_frames
+from safl_bench.views.mapconfig import MapConfig
+from safl_bench.views.noise import Condition, sample_offsets
+from safl_bench.views.render import build_views as render_views
 
 CACHE_VERSION = 1  # bump when the rendering code changes what a key's file holds
 #: per view kind, bumped when only that kind's rendering changes (points 2: cropped to the
@@ -214,7 +215,7 @@ def prepare_sequences(
     serially = parallel is None or parallel.serial
     for plan in todo:
         if serially or len(plan.frames) < 2:
-            views = source.build_views(plan.sequence, config, plan.frames, plan.offsets, plan.kinds,
+            views = render_views(source, plan.sequence, config, plan.frames, plan.offsets, plan.kinds,
                                        progress=progress)
             for c, k in plan.missing:
                 _save(plan.paths[c, k], views[c.name, k], plan.meta[c, k])
@@ -229,7 +230,7 @@ def _build_chunk(
 ) -> dict[tuple[str, str], bytes]:
     """One chunk of `prepare`'s views, compressed (runs on a worker: the compression, as costly
     as the rendering, is spread over the workers, and only compressed bytes travel back)."""
-    views = source.build_views(sequence, config, frames, offsets, kinds, progress=False)
+    views = render_views(source, sequence, config, frames, offsets, kinds, progress=False)
     return {key: _compress(value) for key, value in views.items()}
 
 
@@ -303,7 +304,7 @@ def load_views(
         n = len(source.sequence(sequence))
         frames = check_frames(frames, n, sequence)
         offsets = None if condition.is_clean else sample_offsets(len(frames), condition, seed)
-        return source.build_views(sequence, config, frames, {condition.name: offsets}, [kind],
+        return render_views(source, sequence, config, frames, {condition.name: offsets}, [kind],
                                   progress=progress)[condition.name, kind]
     paths = prepare(source, sequence, config, frames=frames, conditions=[condition], seed=seed,
                     kinds=[kind], progress=progress)

@@ -19,7 +19,7 @@ defaults below are ours and are documented here:
   0.5 + 0.5 * min(height / max_height_m, 1), ground 0.25, unknown 0.
 - encoding "bev-density": BEVPlace's bird's-eye-view images (Luo et al., ICCV 2023), rendered
   from the raw points of the last `window` scans rather than from the local map; the steps and
-  the evidence for each are in `safl_bench.bevdensity`. Use `bev_density_config()`, which sets
+  the evidence for each are in `safl_bench.views.bevdensity`. Use `bev_density_config()`, which sets
   every field to BEVPlace's values; for this encoding some fields read differently:
 
   - `size` 151 (odd sizes are allowed for this encoding only: the sensor pixel is the centre
@@ -136,7 +136,7 @@ class MapConfig:
 
 
 def bev_density_config(**changes: Any) -> MapConfig:
-    """BEVPlace's BEV-density encoding (module doc, `safl_bench.bevdensity`): 151 x 151 pixels
+    """BEVPlace's BEV-density encoding (module doc, `safl_bench.views.bevdensity`): 151 x 151 pixels
     of 0.4 m, a single scan, 0.3 m voxels, a 25 m square crop, sensor-frame -1.2 m < z < 25 m;
     `changes` override single fields (e.g. `window=3`, `backend="octomap"`)."""
     base = MapConfig(

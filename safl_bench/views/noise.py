@@ -3,7 +3,7 @@
 A condition moves the viewpoint of each query frame: a translation drawn uniformly over the disc
 of radius `a` metres in the ground plane and a heading change drawn uniformly from (-b/2, b/2)
 radians. The offsets are expressed in the robot's own frame (x forward, y left) and are applied
-where the top-view map is rendered (see `safl_bench.topview`), never by warping a finished image.
+where the top-view map is rendered (see `safl_bench.views.topview`), never by warping a finished image.
 """
 
 from __future__ import annotations

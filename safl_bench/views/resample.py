@@ -1,9 +1,9 @@
 """Resampling finished top-view images: to another viewpoint, and to a method's input size.
 
-Sources with points re-render a view from the local map (`safl_bench.topview`); an image source
+Sources with points re-render a view from the local map (`safl_bench.views.topview`); an image source
 has nothing to re-render from, so its noisy queries are the image resampled to the moved
 viewpoint. Choices, and why:
-- `move_viewpoint` uses the viewpoint offsets of `safl_bench.noise` exactly as the renderer does
+- `move_viewpoint` uses the viewpoint offsets of `safl_bench.views.noise` exactly as the renderer does
   ([dx, dy] metres in the robot frame, x forward, y left, and dtheta rad): the output shows what
   lies around the moved viewpoint. Nearest-neighbour sampling keeps the image's value levels
   (a count image stays a count image; interpolation would blur every query but no database

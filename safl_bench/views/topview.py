@@ -10,7 +10,7 @@ central pixels) and aligned with its heading:
 so forward is up (row 0 is farthest ahead) and left is left (column 0 is farthest left).
 Turning the viewpoint left by 90 degrees turns the image clockwise: np.rot90(image, -1).
 
-Viewpoint noise (dx, dy, dtheta in the robot frame, `safl_bench.noise.sample_offsets`) moves
+Viewpoint noise (dx, dy, dtheta in the robot frame, `safl_bench.views.noise.sample_offsets`) moves
 the viewpoint before projection (`noisy_viewpoints`); finished images are never warped.
 
 Heights are measured above the ground under the robot (robot z - sensor_height_m); see
@@ -18,7 +18,7 @@ Heights are measured above the ground under the robot (robot z - sensor_height_m
 so an obstacle anywhere in the pixel's column wins over ground.
 
 The "bev-density" encoding (BEVPlace's images) is not drawn from the local map's voxels but
-from the raw points of the window's scans, in `safl_bench.bevdensity`, with BEVPlace's own
+from the raw points of the window's scans, in `safl_bench.views.bevdensity`, with BEVPlace's own
 geometry, which differs from the above: an image of any size (151 x 151) whose centre pixel
 (c0, c0), c0 = (size - 1) / 2, holds the sensor, and row = c0 - trunc(x / cell),
 col = c0 - trunc(y / cell) (truncation toward zero, so the centre row and column are two cells
@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from safl_bench.errors import ConfigError
-from safl_bench.mapconfig import MapConfig
+from safl_bench.views.mapconfig import MapConfig
 
 UNKNOWN = 0.0
 HEIGHT_GROUND_VALUE = 0.25
@@ -69,10 +69,10 @@ def encode(centres: np.ndarray, robot_z: float, config: MapConfig) -> tuple[np.n
     """Pixel values of occupied voxels: (xy (K, 2) float64, value (K,) float32).
 
     Voxels below `min_height_m` or above `max_height_m` (above ground) are dropped.
-    The "bev-density" encoding has no per-voxel value (it counts; `safl_bench.bevdensity`).
+    The "bev-density" encoding has no per-voxel value (it counts; `safl_bench.views.bevdensity`).
     """
     if config.encoding == "bev-density":
-        raise ConfigError("the bev-density encoding is rendered from points (safl_bench.bevdensity), not encoded per voxel")
+        raise ConfigError("the bev-density encoding is rendered from points (safl_bench.views.bevdensity), not encoded per voxel")
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     h = centres[:, 2] - (robot_z - config.sensor_height_m)
     keep = (h >= config.min_height_m) & (h <= config.max_height_m)
@@ -148,13 +148,13 @@ def scan_topview(points: np.ndarray, config: MapConfig | None = None) -> np.ndar
     """Top view (size, size) of one scan in its own sensor frame (no local map), for looking at.
 
     Points are voxelised first, so the encoding matches the map-based views. With the
-    "bev-density" encoding this is BEVPlace's image of the scan (`safl_bench.bevdensity`).
+    "bev-density" encoding this is BEVPlace's image of the scan (`safl_bench.views.bevdensity`).
     """
-    from safl_bench.localmap import keys_to_centres, voxel_keys
+    from safl_bench.views.localmap import keys_to_centres, voxel_keys
 
     config = config or MapConfig()
     if config.encoding == "bev-density":
-        from safl_bench.bevdensity import density_image
+        from safl_bench.views.bevdensity import density_image
 
         return density_image(points, config)
     pts = np.asarray(points)[:, :3]

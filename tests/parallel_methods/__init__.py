@@ -7,7 +7,6 @@ import signal
 from pathlib import Path
 
 import numpy as np
-
 from safl_bench.method import Method, as_topview
 
 

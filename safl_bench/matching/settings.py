@@ -1,0 +1,97 @@
+"""The matcher settings of an evaluation: both matching modes and the evaluation-level ones.
+
+`EvaluationConfig` is what every record's ``matcher`` field holds and what a preset
+(`safl_bench.matching.presets`) names: the sequence matcher's `MatcherConfig` (the single-frame
+settings follow from it) and two evaluation-level settings that reproduce the authors' public
+code, both off by default (the paper's protocol): ``max_frames`` keeps only the first N of the
+task's frames on both sides (their ``test_len``) and ``trim_queries`` matches every query but
+leaves the first and last N out of the metrics (their PR curve starts ``ds + 10`` queries in).
+It lives with the matcher, not with the evaluation that reads it, so that the presets need
+nothing of a later stage.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from safl_bench.errors import ConfigError
+from safl_bench.matching.matcher import MatcherConfig
+
+#: The matching modes every evaluation reports, in the order tables show them.
+MODES = ("sequence", "single_frame")
+
+
+#: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
+EVALUATION_SETTINGS = ("max_frames", "trim_queries")
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """The matcher settings of an evaluation (recorded with every result).
+
+    max_frames: use only the first N frames of the task (of its every-`step`-th frames) as
+    database AND queries (None: all). trim_queries: leave the first and the last N queries out
+    of the metrics (they are still matched, and their trajectories use their neighbours).
+    """
+
+    sequence: MatcherConfig = field(default_factory=MatcherConfig)
+    max_frames: int | None = None
+    trim_queries: int = 0
+
+    def __post_init__(self) -> None:
+        n = self.max_frames
+        if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
+            raise ConfigError(f"max_frames must be null (all frames) or an integer >= 1, got {n!r}")
+        t = self.trim_queries
+        if not isinstance(t, int) or isinstance(t, bool) or t < 0:
+            raise ConfigError(f"trim_queries must be an integer >= 0, got {t!r}")
+
+    @property
+    def single_frame(self) -> MatcherConfig:
+        """The no-sequence baseline (`matching.single_frame`'s settings: one frame, no contrast
+        enhancement), scored like the sequence matcher, except that the authors' capped 1/S
+        ("inverse", a quirk of their sequence matcher: on raw differences below 1 it would cap
+        every query and, with ``capped_match``, answer frame 1 for all) becomes "min", its
+        ranking without the quirks. The recorded ``single_frame`` settings say which."""
+        seq = self.sequence
+        if seq.score == "inverse":
+            return MatcherConfig(method="single_frame", ds=0, enhance_window=0, score="min",
+                                 ratio_window=seq.ratio_window, dtype=seq.dtype, preset=seq.preset)
+        return MatcherConfig(method="single_frame", ds=0, enhance_window=0, score=seq.score,
+                             ratio_window=seq.ratio_window, dtype=seq.dtype, shift=seq.shift,
+                             preset=seq.preset)
+
+    def matcher(self, mode: str) -> MatcherConfig:
+        return self.sequence if mode == "sequence" else self.single_frame
+
+    def to_dict(self) -> dict[str, Any]:
+        """What records store: each mode's matcher settings, and the evaluation-level ones."""
+        out: dict[str, Any] = {mode: self.matcher(mode).to_dict() for mode in MODES}
+        out["evaluation"] = {name: getattr(self, name) for name in EVALUATION_SETTINGS}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EvaluationConfig:
+        """The config a record's ``matcher`` field describes (`to_dict`'s inverse; the
+        single-frame settings follow from the sequence ones). A record made before a setting
+        existed is read with that setting's default, which is what its code did."""
+        if not isinstance(data, dict) or not isinstance(data.get("sequence"), dict):
+            raise ConfigError(f"matcher settings need a 'sequence' mapping, got {data!r}")
+        extra = data.get("evaluation", {})
+        if not isinstance(extra, dict) or set(extra) - set(EVALUATION_SETTINGS):
+            raise ConfigError(f"evaluation settings: expected keys of {list(EVALUATION_SETTINGS)}, "
+                              f"got {extra!r}")
+        return cls(MatcherConfig.from_dict(data["sequence"]), **extra)
+
+
+def same_settings(recorded: Any, wanted: dict[str, Any]) -> bool:
+    """Whether a record's ``matcher`` field holds the settings `wanted` (an
+    `EvaluationConfig.to_dict()`), reading settings the record predates as their defaults: a
+    record made before the presets existed is the "paper" preset. Never raises."""
+    if recorded == wanted:
+        return True
+    try:
+        return EvaluationConfig.from_dict(recorded).to_dict() == wanted
+    except (ConfigError, TypeError):
+        return False
