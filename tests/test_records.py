@@ -197,3 +197,54 @@ def test_version_1_records_are_kept_only_where_version_2_scores_the_same(tmp_pat
     assert [r.method.name for r in records] == ["a"] and records[0].metrics_version == 1
     assert len(problems) == 1 and problems[0].path == revisit
     assert "metrics version 1" in problems[0].reason and "safl-bench run --method b@1" in problems[0].reason
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_the_published_record_schema_is_current() -> None:
+    from safl_bench.cli.records_schema import schema_text
+
+    committed = (REPO / "docs" / "reference" / "record.schema.json").read_text(encoding="utf-8")
+    assert committed == schema_text(), "regenerate: safl-bench records schema --out docs/reference/record.schema.json"
+
+
+def test_the_schema_states_the_rules_of_the_fields() -> None:
+    from safl_bench.results.records import record_schema
+
+    schema = record_schema()
+    assert {"method", "task", "seed", "results", "timings", "environment", "created", "schema"} <= set(
+        schema["required"])
+    task = schema["$defs"]["TaskInfo"]["properties"]
+    assert task["protocol"]["enum"] == ["paper", "revisit", "bevplace"]
+    f1 = schema["$defs"]["Metrics"]["properties"]["f1_max"]["anyOf"][0]
+    assert (f1["minimum"], f1["maximum"]) == (0, 1)
+
+
+def test_every_file_the_schema_accepts_is_a_record_and_a_bad_one_fails_it(tmp_path: Path) -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    from safl_bench.results.records import record_schema
+
+    path = write_record(tmp_path, make_record())
+    data = json.loads(path.read_text())
+    jsonschema.validate(data, record_schema())
+    data["task"]["protocol"] = "other"
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(data, record_schema())
+
+
+def test_records_check_names_the_file_and_field_and_exits_2(tmp_path: Path, capsys) -> None:
+    from safl_bench.cli import main as cli_main
+
+    good = write_record(tmp_path, make_record("a"))
+    bad = write_record(tmp_path, make_record("b"))
+    data = json.loads(bad.read_text())
+    data["timings"]["repeats"] = "five"
+    bad.write_text(json.dumps(data))
+    assert cli_main(["records", "check", str(tmp_path)]) == 2
+    captured = capsys.readouterr()
+    lines = [line for line in captured.err.splitlines() if str(bad) in line]
+    assert len(lines) == 1 and "timings.repeats: expected an integer, got str" in lines[0]
+    assert str(good) not in captured.err and "1 valid records" in captured.out
+    records, problems = load_records(tmp_path)
+    assert [r.method.name for r in records] == ["a"] and problems[0].corrupt

@@ -35,6 +35,10 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
         "methods": ("list_methods", "list the registered descriptor methods"),
         "matchers": ("list_matchers", "list the matcher presets with every setting"),
     },
+    "records": {
+        "schema": ("records_schema", "print (or write with --out) the JSON Schema of a result record file"),
+        "check": ("records_check", "validate the result records under a folder, one line per bad file"),
+    },
     "run": ("run", "run a method on benchmark tasks and store result records"),
     "explain": ("explain", "draw one cell's matrices, matches, scores and worst false positives to a PNG"),
     "train": ("train", "train a learned method (BiGAN, Stable-AFL) on the training sequences"),
@@ -46,6 +50,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
 GROUP_HELP = {
     "data": "make, inspect and prepare datasets (synthetic default or KITTI)",
     "list": "list registered tasks or methods",
+    "records": "the result records: their JSON Schema, and a check of a folder of them",
 }
 
 

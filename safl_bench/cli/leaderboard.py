@@ -1,5 +1,9 @@
 """`safl-bench leaderboard`: regenerate the leaderboard's tables and figures from result records.
 
+A record file that is not a valid record (not JSON, or against the schema,
+`safl-bench records schema`) is named in one line with the field at fault; the leaderboard is
+built from the other records and the command exits with status 2.
+
 Defaults make the leaderboard directory self-contained: it holds its records (records/), the
 records of the same tasks under other matcher presets (preset-records/<preset>/: a record's path
 does not name its preset) and training logs (training-logs/) beside the generated tables and
@@ -89,7 +93,8 @@ def main(args: argparse.Namespace) -> int:
     results_shown = _shown(results)
     problems += bad
     for problem in problems:
-        print(f"safl-bench: warning: skipped record {problem}", file=sys.stderr)
+        severity = "error" if problem.corrupt else "warning"
+        print(f"safl-bench: {severity}: skipped record {problem}", file=sys.stderr)
     report = build_leaderboard(
         records,
         out,
@@ -118,7 +123,9 @@ def main(args: argparse.Namespace) -> int:
     if report.headline is not None and out.resolve() == default_out_dir().resolve() and readme.is_file():
         if update_readme(readme, report.headline, report.headline_records):
             print(f"README headline: {readme}")
-    return 0
+    # built from the other records; a record that is not valid (bad JSON, against the schema) is
+    # an error the user has to fix, so the command says so in its status
+    return 2 if any(problem.corrupt for problem in problems) else 0
 
 
 def _shown(path: Path) -> str:

@@ -11,13 +11,18 @@ metrics).
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
+
+#: This package's modules: never looked up in `cell` (importing them goes on as usual).
+_MODULES = ('cell', 'groundtruth', 'metrics', 'uncertainty')
 
 
 def __getattr__(name: str) -> Any:
-    from safl_bench.evaluation import cell
-
+    if name.startswith("__") or name in _MODULES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module = importlib.import_module(f"{__name__}.cell")
     try:
-        return getattr(cell, name)
+        return getattr(module, name)
     except AttributeError:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None

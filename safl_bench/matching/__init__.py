@@ -10,13 +10,18 @@ settings of an evaluation, `EvaluationConfig`), `presets` (named sets of those s
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
+
+#: This package's modules: never looked up in `matcher` (importing them goes on as usual).
+_MODULES = ('matcher', 'settings', 'presets', 'loop', 'confidence')
 
 
 def __getattr__(name: str) -> Any:
-    from safl_bench.matching import matcher
-
+    if name.startswith("__") or name in _MODULES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module = importlib.import_module(f"{__name__}.matcher")
     try:
-        return getattr(matcher, name)
+        return getattr(module, name)
     except AttributeError:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None

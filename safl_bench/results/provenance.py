@@ -15,6 +15,11 @@ import sys
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
+from typing import ClassVar
+
+from pydantic import ConfigDict
+
+from safl_bench.results.fields import RECORD_CONFIG, Count, Text
 
 #: Distributions whose versions are recorded with every result (distribution names).
 LIBRARIES: tuple[str, ...] = (
@@ -34,13 +39,15 @@ LIBRARIES: tuple[str, ...] = (
 class Environment:
     """The software and hardware a result was produced on."""
 
-    python: str
-    libraries: dict[str, str] = field(default_factory=dict)
-    platform: str = ""
-    cpu_model: str = ""
-    cpu_cores: int = 0
-    torch_threads: int | None = None
-    git_revision: str = ""
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    python: Text
+    libraries: dict[Text, Text] = field(default_factory=dict)
+    platform: Text = ""
+    cpu_model: Text = ""
+    cpu_cores: Count = 0
+    torch_threads: Count | None = None
+    git_revision: Text = ""
 
 
 def library_versions(names: tuple[str, ...] = LIBRARIES) -> dict[str, str]:

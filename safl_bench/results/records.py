@@ -7,9 +7,12 @@ environment and when it was made. Files live at
 
     <results>/<method>@<version>/<task id, '/' -> '__'>/seed-<n>.json
 
-and are written atomically. Loading validates every field: a file that is not valid JSON, lacks
-a key, has a value of the wrong type or a non-finite number raises `CorruptRecordError` naming
-the file, so callers report it and recompute instead of using it.
+and are written atomically. The record's parts are dataclasses whose field types (`fields`) carry
+every rule a file must keep; pydantic validates a file against them (`ResultRecord.from_json`)
+and publishes them as a JSON Schema (`record_schema`, ``safl-bench records schema``,
+docs/reference/record.schema.json). A file that is not valid JSON, lacks a key, has a value of
+the wrong type, out of range or non-finite raises `CorruptRecordError` naming the file and the
+field in one line, so callers report it and recompute instead of using it.
 
 Every record says which definitions of the measures made it (``metrics_version``, see
 `safl_bench.evaluation.metrics`; records without it are version 1). Since version 2 a record also holds
@@ -30,14 +33,17 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, cast, get_args
 
 import numpy as np
+from pydantic import AfterValidator, BeforeValidator, ConfigDict, Field, Strict, TypeAdapter
+from pydantic import ValidationError as _ValidationError
 
 from safl_bench.common.atomic import atomic_write_text
 from safl_bench.common.fingerprint import to_jsonable
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation.metrics import METRICS_VERSION, RECALL_AT, Outcomes, evaluate_outcomes
+from safl_bench.results.fields import RECORD_CONFIG, Amount, Count, Name, Number, Rate, Text
 from safl_bench.results.provenance import Environment, collect_environment
 
 if TYPE_CHECKING:
@@ -47,13 +53,13 @@ if TYPE_CHECKING:
 SCHEMA_VERSION = 1
 #: Matching modes a record may hold; "sequence" is SeqSLAM, "single_frame" nearest neighbour.
 MODES: tuple[str, ...] = ("sequence", "single_frame")
-PROTOCOLS: tuple[str, ...] = ("paper", "revisit", "bevplace")
-SOURCE_KINDS: tuple[str, ...] = ("synth", "kitti", "bev")
+ProtocolName = Literal["paper", "revisit", "bevplace"]
+SourceKind = Literal["synth", "kitti", "bev"]
+PROTOCOLS: tuple[str, ...] = get_args(ProtocolName)
+SOURCE_KINDS: tuple[str, ...] = get_args(SourceKind)
 #: Curves are stored with at most this many points (plots only; metrics are exact values).
 MAX_CURVE_POINTS = 200
 RESULTS_ENV = "SAFL_RESULTS"
-
-T = TypeVar("T")
 
 
 class CorruptRecordError(DataError):
@@ -75,12 +81,73 @@ def default_results_dir() -> Path:
 # The record's parts
 
 
+# --------------------------------------------------------------------------------------------
+# The rules a file must keep beyond its fields' types (pydantic runs them; messages as printed)
+
+
+def _same_length(a: str, b: str) -> Any:
+    def check(curve: Any) -> Any:
+        if len(getattr(curve, a)) != len(getattr(curve, b)):
+            raise ValueError(f"{a} and {b} differ in length")
+        return curve
+
+    return check
+
+
+def _one_length(queries: QueryOutcomes) -> QueryOutcomes:
+    lengths = {len(queries.confidence), len(queries.label), len(queries.has_true_place),
+               len(queries.has_candidate)}
+    if queries.true_rank is not None:
+        lengths.add(len(queries.true_rank))
+    if len(lengths) != 1:
+        raise ValueError("its per-query lists differ in length")
+    return queries
+
+
+def _iso_time(text: str) -> str:
+    try:
+        datetime.fromisoformat(text)
+    except ValueError:
+        raise ValueError(f"not an ISO 8601 time: {text!r}") from None
+    return text
+
+
+def _supported_schema(version: int) -> int:
+    if version != SCHEMA_VERSION:
+        raise ValueError(f"version {version} is not the supported {SCHEMA_VERSION}")
+    return version
+
+
+def _known_metrics_version(version: int) -> int:
+    if not 1 <= version <= METRICS_VERSION:
+        raise ValueError(f"version {version} is newer than this code's {METRICS_VERSION}: "
+                         "upgrade safl-bench to read it")
+    return version
+
+
+def _known_modes(results: Any) -> Any:
+    if isinstance(results, dict):
+        if not results:
+            raise ValueError("holds no matching mode")
+        unknown = sorted(set(results) - set(MODES))
+        if unknown:
+            raise ValueError(f"unknown matching mode {unknown[0]!r} (known: {', '.join(MODES)})")
+        return dict(sorted(results.items()))
+    return results
+
+
+#: `metrics_version`: 1 (records from before it was stored) up to this code's.
+MetricsVersion = Annotated[int, Strict(), Field(ge=1), AfterValidator(_known_metrics_version)]
+
+
 @dataclass(frozen=True)
 class MethodInfo:
     """The method that produced a record: registry name, version and constructor parameters."""
 
-    name: str
-    version: str
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    name: Name
+    version: Name
     params: dict[str, Any] = field(default_factory=dict)
 
 
@@ -88,15 +155,17 @@ class MethodInfo:
 class TaskInfo:
     """The task a record answers: id, version, protocol, where the data came from, full spec."""
 
-    id: str
-    version: int
-    protocol: str  # "paper" | "revisit"
-    sequence: str
-    condition: str | None  # paper protocol: e.g. "T1R1"; revisit: None
-    source_kind: str  # "synth" | "kitti"
-    source_label: str  # e.g. "synthetic default (seed 0)", "KITTI"
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    id: Name
+    version: Count
+    protocol: ProtocolName
+    sequence: Name
+    condition: Text | None  # paper protocol: e.g. "T1R1"; revisit: None
+    source_kind: SourceKind
+    source_label: Name  # e.g. "synthetic default (seed 0)", "KITTI"
     spec: dict[str, Any] = field(default_factory=dict)
-    spec_fingerprint: str = ""
+    spec_fingerprint: Text = ""
 
 
 @dataclass(frozen=True)
@@ -110,19 +179,22 @@ class Metrics:
     queries with a candidate (the others are left out of every measure).
     """
 
-    recall_at_100_precision: float | None
-    auc: float | None
-    f1_max: float | None
-    extended_precision: float | None
-    n_queries: int
-    n_positives: int
-    recall_at_1: float | None = None
-    recall_at_n: dict[str, float] | None = None
-    recall_at_100_precision_of_correct: float | None = None
-    f1_max_of_correct: float | None = None
-    extended_precision_of_correct: float | None = None
-    n_scored: int | None = None
-    n_correct: int | None = None
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    recall_at_100_precision: Rate | None
+    auc: Rate | None
+    f1_max: Rate | None
+    extended_precision: Rate | None
+    n_queries: Count
+    n_positives: Count
+    recall_at_1: Rate | None = None
+    #: Recall@N by N (a positive integer, as a string: JSON keys are strings)
+    recall_at_n: dict[Annotated[str, Strict(), Field(pattern=r"^[1-9][0-9]*$")], Rate] | None = None
+    recall_at_100_precision_of_correct: Rate | None = None
+    f1_max_of_correct: Rate | None = None
+    extended_precision_of_correct: Rate | None = None
+    n_scored: Count | None = None
+    n_correct: Count | None = None
 
 
 @dataclass(frozen=True)
@@ -132,11 +204,13 @@ class QueryOutcomes:
     reported; label: 1 correct, 0 ambiguous, -1 wrong; has_true_place, has_candidate: 0 or 1;
     true_rank: rank of the nearest true place (0 = none), single-frame mode only."""
 
-    confidence: list[float | None]
-    label: list[int]
-    has_true_place: list[int]
-    has_candidate: list[int]
-    true_rank: list[int] | None = None
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    confidence: list[Number | None]
+    label: list[Annotated[int, Strict(), Field(ge=-1, le=1)]]
+    has_true_place: list[Annotated[int, Strict(), Field(ge=0, le=1)]]
+    has_candidate: list[Annotated[int, Strict(), Field(ge=0, le=1)]]
+    true_rank: list[Count] | None = None
 
     @classmethod
     def of(cls, o: Outcomes) -> QueryOutcomes:
@@ -163,24 +237,30 @@ class QueryOutcomes:
 class PRCurve:
     """Precision against recall."""
 
-    precision: list[float]
-    recall: list[float]
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    precision: list[Number]
+    recall: list[Number]
 
 
 @dataclass(frozen=True)
 class ROCCurve:
     """True-positive rate against false-positive rate."""
 
-    fpr: list[float]
-    tpr: list[float]
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    fpr: list[Number]
+    tpr: list[Number]
 
 
 @dataclass(frozen=True)
 class Curves:
     """Precision-recall and ROC curves, downsampled to at most MAX_CURVE_POINTS points."""
 
-    pr: PRCurve
-    roc: ROCCurve
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    pr: Annotated[PRCurve, AfterValidator(_same_length("precision", "recall"))]
+    roc: Annotated[ROCCurve, AfterValidator(_same_length("fpr", "tpr"))]
 
 
 @dataclass(frozen=True)
@@ -188,9 +268,15 @@ class ModeResult:
     """Metrics and curves of one matching mode, and (metrics version 2 on) each query's
     outcome."""
 
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
     metrics: Metrics
     curves: Curves
-    queries: QueryOutcomes | None = None
+    queries: Annotated[QueryOutcomes, AfterValidator(_one_length)] | None = None
+
+
+#: The matching modes of a record (keys from MODES, read in sorted order).
+ModeResults = Annotated[dict[str, ModeResult], BeforeValidator(_known_modes)]
 
 
 @dataclass(frozen=True)
@@ -203,29 +289,33 @@ class Timings:
     how_run: e.g. "sequential, pinned" (cells run one at a time) or "parallel, 4 workers".
     """
 
-    describe_ms_per_frame: float
-    describe_frames_per_s: float
-    matcher_s: float
-    peak_memory_mb: float | None
-    repeats: int
-    how_run: str
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    describe_ms_per_frame: Amount
+    describe_frames_per_s: Amount
+    matcher_s: Amount
+    peak_memory_mb: Amount | None
+    repeats: Count
+    how_run: Text
 
 
 @dataclass(frozen=True)
 class ResultRecord:
     """One run of one method on one task with one seed."""
 
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
     method: MethodInfo
     task: TaskInfo
-    seed: int
+    seed: Count
     matcher: dict[str, Any]
-    results: dict[str, ModeResult]  # keys from MODES
+    results: ModeResults  # keys from MODES
     timings: Timings
     environment: Environment
-    created: str  # UTC, ISO 8601
-    schema: int = SCHEMA_VERSION
+    created: Annotated[Name, AfterValidator(_iso_time)]  # UTC, ISO 8601
+    schema: Annotated[Count, AfterValidator(_supported_schema)] = SCHEMA_VERSION
     #: the version of `safl_bench.evaluation.metrics` that scored it (a file without one is version 1)
-    metrics_version: int = METRICS_VERSION
+    metrics_version: MetricsVersion = METRICS_VERSION
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -238,11 +328,11 @@ class ResultRecord:
 
     @classmethod
     def from_json(cls, data: Any, *, source: str | os.PathLike[str] = "<record>") -> ResultRecord:
-        """Build a record from parsed JSON, validating every field.
+        """Build a record from parsed JSON, validating every field (`record_schema`).
 
-        Raises CorruptRecordError naming `source` and the offending key.
+        Raises CorruptRecordError naming `source` and the offending field.
         """
-        return _parse_record(_Reader(Path(source)), data)
+        return _validate(_RECORD, data, Path(source))
 
 
 def utc_now() -> str:
@@ -394,10 +484,10 @@ def task_info(spec: TaskSpec, source_label: str, **extra: Any) -> TaskInfo:
     return TaskInfo(
         id=spec.id,
         version=int(spec.version),
-        protocol=spec.protocol,
+        protocol=cast(ProtocolName, spec.protocol),
         sequence=spec.sequence,
         condition=spec.condition.name if spec.protocol == "paper" else None,
-        source_kind=spec.source,
+        source_kind=cast(SourceKind, spec.source),
         source_label=source_label,
         spec={**spec.to_dict(), **to_jsonable(extra)},
         spec_fingerprint=spec.fingerprint,
@@ -526,10 +616,12 @@ def load_existing(
 
 @dataclass(frozen=True)
 class Problem:
-    """A record file that could not be used, and why."""
+    """A record file that could not be used, and why; `corrupt` when it is not a valid record
+    (unreadable, not JSON, or against the schema) rather than a duplicate or an outdated one."""
 
     path: Path
     reason: str
+    corrupt: bool = False
 
     def __str__(self) -> str:
         return f"{self.path}: {self.reason}"
@@ -554,7 +646,7 @@ def load_records(results_dir: str | os.PathLike[str]) -> tuple[list[ResultRecord
         try:
             record = load_record(path)
         except CorruptRecordError as exc:
-            problems.append(Problem(path, exc.reason))
+            problems.append(Problem(path, exc.reason, corrupt=True))
             continue
         try:
             record = rescore(record)
@@ -588,15 +680,17 @@ class EvaluatedCell:
     run keeps it on disk until the cell is timed, so an interrupted run does not evaluate the
     cell again."""
 
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
     method: MethodInfo
     task: TaskInfo
-    seed: int
+    seed: Count
     matcher: dict[str, Any]
-    results: dict[str, ModeResult]
-    describe_frames_per_s: float  # batched throughput measured while evaluating
-    matcher_s: float
-    evaluated_on: str  # "this process", "2 local worker processes", "Ray cluster (auto)"
-    metrics_version: int = METRICS_VERSION
+    results: ModeResults
+    describe_frames_per_s: Amount  # batched throughput measured while evaluating
+    matcher_s: Amount
+    evaluated_on: Name  # "this process", "2 local worker processes", "Ray cluster (auto)"
+    metrics_version: MetricsVersion = METRICS_VERSION
 
 
 def evaluated_path(
@@ -611,7 +705,7 @@ def write_evaluated(results_dir: str | os.PathLike[str], cell: EvaluatedCell) ->
     """Write `cell` atomically beside its future record; returns the path."""
     path = evaluated_path(results_dir, cell.method.name, cell.method.version, cell.task.id, cell.seed)
     data = dict(to_jsonable(cell))
-    _parse_evaluated(_Reader(path), data)  # refuse to write what could not be read back
+    _validate(_EVALUATED, data, path)  # refuse to write what could not be read back
     atomic_write_text(path, dumps_record(data))
     return path
 
@@ -625,295 +719,85 @@ def load_evaluated(path: str | os.PathLike[str]) -> EvaluatedCell:
         raise DataError(f"evaluated cell {p} does not exist") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise CorruptRecordError(p, f"cannot be read as JSON ({exc})") from None
-    return _parse_evaluated(_Reader(p), data)
+    return _validate(_EVALUATED, data, p)
 
 
 # --------------------------------------------------------------------------------------------
-# Validation
+# Validation and the published schema
 
 
 def _reject_constant(name: str) -> float:
     raise ValueError(f"{name} is not allowed")
 
 
-class _Reader:
-    """Typed access to parsed JSON that names the file and key path in every error."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-
-    def fail(self, where: str, message: str) -> CorruptRecordError:
-        return CorruptRecordError(self.path, f"{where}: {message}" if where else message)
-
-    def obj(self, data: Any, where: str) -> dict[str, Any]:
-        if not isinstance(data, dict):
-            raise self.fail(where, f"expected an object, got {type(data).__name__}")
-        return data
-
-    def get(self, data: dict[str, Any], key: str, where: str, check: Callable[[Any, str], T]) -> T:
-        sub = f"{where}.{key}" if where else key
-        if key not in data:
-            raise self.fail(sub, "missing")
-        return check(data[key], sub)
-
-    def str_(self, value: Any, where: str) -> str:
-        if not isinstance(value, str):
-            raise self.fail(where, f"expected a string, got {type(value).__name__}")
-        return value
-
-    def nonempty_str(self, value: Any, where: str) -> str:
-        text = self.str_(value, where)
-        if not text:
-            raise self.fail(where, "must not be empty")
-        return text
-
-    def opt_str(self, value: Any, where: str) -> str | None:
-        return None if value is None else self.str_(value, where)
-
-    def int_(self, value: Any, where: str) -> int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.fail(where, f"expected an integer, got {type(value).__name__}")
-        if value < 0:
-            raise self.fail(where, f"must be >= 0, got {value}")
-        return value
-
-    def opt_int(self, value: Any, where: str) -> int | None:
-        return None if value is None else self.int_(value, where)
-
-    def float_(self, value: Any, where: str) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.fail(where, f"expected a number, got {type(value).__name__}")
-        if not math.isfinite(value) or value < 0:
-            raise self.fail(where, f"must be a finite number >= 0, got {value}")
-        return float(value)
-
-    def opt_float(self, value: Any, where: str) -> float | None:
-        return None if value is None else self.float_(value, where)
-
-    def rate(self, value: Any, where: str) -> float | None:
-        if value is None:
-            return None
-        number = self.float_(value, where)
-        if number > 1.0:
-            raise self.fail(where, f"must be a fraction in [0, 1], got {number}")
-        return number
-
-    def dict_(self, value: Any, where: str) -> dict[str, Any]:
-        return self.obj(value, where)
-
-    def rates(self, value: Any, where: str) -> dict[str, float] | None:
-        """None, or {"N": fraction} with N a positive integer."""
-        if value is None:
-            return None
-        out: dict[str, float] = {}
-        for key, rate in self.obj(value, where).items():
-            number = self.rate(rate, f"{where}.{key}")
-            if not key.isdigit() or int(key) < 1 or number is None:
-                raise self.fail(f"{where}.{key}", "expected a positive integer N and a fraction")
-            out[key] = number
-        return out
-
-    def floats(self, value: Any, where: str) -> list[float]:
-        if not isinstance(value, list):
-            raise self.fail(where, f"expected a list, got {type(value).__name__}")
-        out = []
-        for i, v in enumerate(value):
-            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-                raise self.fail(f"{where}[{i}]", f"expected a finite number, got {v!r}")
-            out.append(float(v))
-        return out
-
-    def str_map(self, value: Any, where: str) -> dict[str, str]:
-        data = self.obj(value, where)
-        return {k: self.get(data, k, where, self.str_) for k in data}
-
-    def one_of(self, options: tuple[str, ...]) -> Callable[[Any, str], str]:
-        def check(value: Any, where: str) -> str:
-            text = self.str_(value, where)
-            if text not in options:
-                raise self.fail(where, f"must be one of {', '.join(options)}, got {text!r}")
-            return text
-
-        return check
+def _record_defaults(data: Any) -> Any:
+    """What a record file means by an absent key that the parts default otherwise: without
+    ``metrics_version`` it predates it (version 1); ``schema`` must be there."""
+    if isinstance(data, dict):
+        if "schema" not in data:
+            raise ValueError("schema: missing")
+        return {"metrics_version": 1, **data}
+    return data
 
 
-def _parse_method(r: _Reader, data: Any) -> MethodInfo:
-    d = r.obj(data, "method")
-    return MethodInfo(
-        name=r.get(d, "name", "method", r.nonempty_str),
-        version=r.get(d, "version", "method", r.nonempty_str),
-        params=r.get(d, "params", "method", r.dict_),
-    )
+def _evaluated_defaults(data: Any) -> Any:
+    """An evaluated cell's file without ``metrics_version`` predates it (version 1)."""
+    return {"metrics_version": 1, **data} if isinstance(data, dict) else data
 
 
-def _parse_task(r: _Reader, data: Any) -> TaskInfo:
-    d = r.obj(data, "task")
-    return TaskInfo(
-        id=r.get(d, "id", "task", r.nonempty_str),
-        version=r.get(d, "version", "task", r.int_),
-        protocol=r.get(d, "protocol", "task", r.one_of(PROTOCOLS)),
-        sequence=r.get(d, "sequence", "task", r.nonempty_str),
-        condition=r.get(d, "condition", "task", r.opt_str),
-        source_kind=r.get(d, "source_kind", "task", r.one_of(SOURCE_KINDS)),
-        source_label=r.get(d, "source_label", "task", r.nonempty_str),
-        spec=r.get(d, "spec", "task", r.dict_),
-        spec_fingerprint=r.get(d, "spec_fingerprint", "task", r.str_),
-    )
+_RECORD: TypeAdapter[ResultRecord] = TypeAdapter(
+    Annotated[ResultRecord, BeforeValidator(_record_defaults)])
+_EVALUATED: TypeAdapter[EvaluatedCell] = TypeAdapter(
+    Annotated[EvaluatedCell, BeforeValidator(_evaluated_defaults)])
+
+#: How pydantic's error types read in a record's problem line.
+_MESSAGES: dict[str, Callable[[Any], str]] = {
+    "missing": lambda e: "missing",
+    "int_type": lambda e: f"expected an integer, got {type(e['input']).__name__}",
+    "float_type": lambda e: f"expected a number, got {type(e['input']).__name__}",
+    "string_type": lambda e: f"expected a string, got {type(e['input']).__name__}",
+    "list_type": lambda e: f"expected a list, got {type(e['input']).__name__}",
+    "dict_type": lambda e: f"expected an object, got {type(e['input']).__name__}",
+    "dataclass_type": lambda e: f"expected an object, got {type(e['input']).__name__}",
+    "finite_number": lambda e: f"must be a finite number, got {e['input']!r}",
+    "string_too_short": lambda e: "must not be empty",
+    "string_pattern_mismatch": lambda e: f"expected a positive integer N, got {e['input']!r}",
+    "literal_error": lambda e: f"must be one of {e['ctx']['expected']}, got {e['input']!r}",
+    "greater_than_equal": lambda e: f"must be >= {e['ctx']['ge']}, got {e['input']}",
+    "less_than_equal": lambda e: (f"must be a fraction in [0, 1], got {e['input']}"
+                                  if e["ctx"]["le"] == 1 and isinstance(e["input"], float)
+                                  else f"must be <= {e['ctx']['le']}, got {e['input']}"),
+    "value_error": lambda e: str(e["ctx"]["error"]),
+}
 
 
-def _parse_mode(r: _Reader, data: Any, where: str) -> ModeResult:
-    d = r.obj(data, where)
-    m = r.get(d, "metrics", where, r.dict_)
-    mw = f"{where}.metrics"
-    metrics = Metrics(
-        recall_at_100_precision=r.get(m, "recall_at_100_precision", mw, r.rate),
-        auc=r.get(m, "auc", mw, r.rate),
-        f1_max=r.get(m, "f1_max", mw, r.rate),
-        extended_precision=r.get(m, "extended_precision", mw, r.rate),
-        n_queries=r.get(m, "n_queries", mw, r.int_),
-        n_positives=r.get(m, "n_positives", mw, r.int_),
-        recall_at_1=r.rate(m.get("recall_at_1"), f"{mw}.recall_at_1"),
-        recall_at_n=r.rates(m.get("recall_at_n"), f"{mw}.recall_at_n"),
-        **{key: r.rate(m.get(key), f"{mw}.{key}") for key in (
-            "recall_at_100_precision_of_correct", "f1_max_of_correct",
-            "extended_precision_of_correct")},
-        n_scored=r.opt_int(m.get("n_scored"), f"{mw}.n_scored"),
-        n_correct=r.opt_int(m.get("n_correct"), f"{mw}.n_correct"),
-    )
-    c = r.get(d, "curves", where, r.dict_)
-    cw = f"{where}.curves"
-    pr_raw = r.get(c, "pr", cw, r.dict_)
-    roc_raw = r.get(c, "roc", cw, r.dict_)
-    pr = PRCurve(
-        precision=r.get(pr_raw, "precision", f"{cw}.pr", r.floats),
-        recall=r.get(pr_raw, "recall", f"{cw}.pr", r.floats),
-    )
-    roc = ROCCurve(
-        fpr=r.get(roc_raw, "fpr", f"{cw}.roc", r.floats),
-        tpr=r.get(roc_raw, "tpr", f"{cw}.roc", r.floats),
-    )
-    if len(pr.precision) != len(pr.recall):
-        raise r.fail(f"{cw}.pr", "precision and recall differ in length")
-    if len(roc.fpr) != len(roc.tpr):
-        raise r.fail(f"{cw}.roc", "fpr and tpr differ in length")
-    queries = None if d.get("queries") is None else _parse_queries(r, d["queries"], f"{where}.queries")
-    return ModeResult(metrics=metrics, curves=Curves(pr=pr, roc=roc), queries=queries)
+def _problem(error: Any) -> str:
+    """One pydantic error as "field.path[i]: what is wrong"."""
+    where = ""
+    for part in error["loc"]:
+        if part == "[key]":
+            continue
+        where += f"[{part}]" if isinstance(part, int) else (f".{part}" if where else str(part))
+    kind = error["type"]
+    message = _MESSAGES[kind](error) if kind in _MESSAGES else error["msg"]
+    return f"{where}: {message}" if where else message
 
 
-def _parse_queries(r: _Reader, data: Any, where: str) -> QueryOutcomes:
-    d = r.obj(data, where)
-
-    def ints(key: str, allowed: tuple[int, ...] | None) -> list[int]:
-        values = r.get(d, key, where, lambda v, w: v)
-        if not isinstance(values, list) or any(
-                isinstance(v, bool) or not isinstance(v, int)
-                or (v not in allowed if allowed else v < 0) for v in values):
-            raise r.fail(f"{where}.{key}", "expected a list of integers"
-                         + (f" in {allowed}" if allowed else " >= 0"))
-        return values
-
-    conf = r.get(d, "confidence", where, lambda v, w: v)
-    if not isinstance(conf, list) or any(
-            c is not None and (isinstance(c, bool) or not isinstance(c, int | float)
-                               or not math.isfinite(c)) for c in conf):
-        raise r.fail(f"{where}.confidence", "expected a list of finite numbers or null")
-    out = QueryOutcomes(
-        confidence=[None if c is None else float(c) for c in conf],
-        label=ints("label", (-1, 0, 1)),
-        has_true_place=ints("has_true_place", (0, 1)),
-        has_candidate=ints("has_candidate", (0, 1)),
-        true_rank=None if d.get("true_rank") is None else ints("true_rank", None),
-    )
-    lengths = {len(out.confidence), len(out.label), len(out.has_true_place),
-               len(out.has_candidate)} | ({len(out.true_rank)} if out.true_rank is not None else set())
-    if len(lengths) != 1:
-        raise r.fail(where, "its per-query lists differ in length")
-    return out
-
-
-def _parse_timings(r: _Reader, data: Any) -> Timings:
-    d = r.obj(data, "timings")
-    return Timings(
-        describe_ms_per_frame=r.get(d, "describe_ms_per_frame", "timings", r.float_),
-        describe_frames_per_s=r.get(d, "describe_frames_per_s", "timings", r.float_),
-        matcher_s=r.get(d, "matcher_s", "timings", r.float_),
-        peak_memory_mb=r.get(d, "peak_memory_mb", "timings", r.opt_float),
-        repeats=r.get(d, "repeats", "timings", r.int_),
-        how_run=r.get(d, "how_run", "timings", r.str_),
-    )
-
-
-def _parse_environment(r: _Reader, data: Any) -> Environment:
-    d = r.obj(data, "environment")
-    return Environment(
-        python=r.get(d, "python", "environment", r.str_),
-        libraries=r.get(d, "libraries", "environment", r.str_map),
-        platform=r.get(d, "platform", "environment", r.str_),
-        cpu_model=r.get(d, "cpu_model", "environment", r.str_),
-        cpu_cores=r.get(d, "cpu_cores", "environment", r.int_),
-        torch_threads=r.get(d, "torch_threads", "environment", r.opt_int),
-        git_revision=r.get(d, "git_revision", "environment", r.str_),
-    )
-
-
-def _parse_record(r: _Reader, data: Any) -> ResultRecord:
-    d = r.obj(data, "")
-    schema = r.get(d, "schema", "", r.int_)
-    if schema != SCHEMA_VERSION:
-        raise r.fail("schema", f"version {schema} is not the supported {SCHEMA_VERSION}")
-    results = _parse_results(r, d)
-    created = r.get(d, "created", "", r.nonempty_str)
+def _validate(adapter: TypeAdapter[Any], data: Any, path: Path) -> Any:
+    """`data` validated by `adapter`; CorruptRecordError naming `path` and the first bad field."""
     try:
-        datetime.fromisoformat(created)
-    except ValueError:
-        raise r.fail("created", f"not an ISO 8601 time: {created!r}") from None
-    return ResultRecord(
-        method=_parse_method(r, r.get(d, "method", "", lambda v, w: v)),
-        task=_parse_task(r, r.get(d, "task", "", lambda v, w: v)),
-        seed=r.get(d, "seed", "", r.int_),
-        matcher=r.get(d, "matcher", "", r.dict_),
-        results=results,
-        timings=_parse_timings(r, r.get(d, "timings", "", lambda v, w: v)),
-        environment=_parse_environment(r, r.get(d, "environment", "", lambda v, w: v)),
-        created=created,
-        schema=schema,
-        metrics_version=_metrics_version(r, d, ""),
-    )
+        return adapter.validate_python(data)
+    except _ValidationError as exc:
+        raise CorruptRecordError(path, _problem(exc.errors()[0])) from None
 
 
-def _metrics_version(r: _Reader, d: dict[str, Any], where: str) -> int:
-    """The record's metrics version (1 when absent: records from before it was stored)."""
-    key = f"{where}.metrics_version" if where else "metrics_version"
-    version = r.int_(d.get("metrics_version", 1), key)
-    if not 1 <= version <= METRICS_VERSION:
-        raise r.fail(key, f"version {version} is newer than this code's {METRICS_VERSION}: "
-                          "upgrade safl-bench to read it")
-    return version
-
-
-def _parse_results(r: _Reader, d: dict[str, Any]) -> dict[str, ModeResult]:
-    raw_results = r.get(d, "results", "", r.dict_)
-    if not raw_results:
-        raise r.fail("results", "holds no matching mode")
-    results = {}
-    for mode in sorted(raw_results):
-        if mode not in MODES:
-            raise r.fail(f"results.{mode}", f"unknown matching mode (known: {', '.join(MODES)})")
-        results[mode] = _parse_mode(r, raw_results[mode], f"results.{mode}")
-    return results
-
-
-def _parse_evaluated(r: _Reader, data: Any) -> EvaluatedCell:
-    d = r.obj(data, "")
-    return EvaluatedCell(
-        method=_parse_method(r, r.get(d, "method", "", lambda v, w: v)),
-        task=_parse_task(r, r.get(d, "task", "", lambda v, w: v)),
-        seed=r.get(d, "seed", "", r.int_),
-        matcher=r.get(d, "matcher", "", r.dict_),
-        results=_parse_results(r, d),
-        describe_frames_per_s=r.get(d, "describe_frames_per_s", "", r.float_),
-        matcher_s=r.get(d, "matcher_s", "", r.float_),
-        evaluated_on=r.get(d, "evaluated_on", "", r.nonempty_str),
-        metrics_version=_metrics_version(r, d, ""),
-    )
-
+def record_schema() -> dict[str, Any]:
+    """The JSON Schema of a result record file (what `ResultRecord.from_json` accepts)."""
+    schema = TypeAdapter(ResultRecord).json_schema(mode="validation")
+    schema["required"] = sorted({*schema.get("required", []), "schema"})
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema",
+            "$id": "https://safl-bench/record.schema.json",
+            "title": "safl-bench result record",
+            "description": f"One run of one method on one task with one seed, schema version "
+                           f"{SCHEMA_VERSION} (safl_bench.results.records).",
+            **{k: v for k, v in schema.items() if k not in ("title", "description")}}
