@@ -15,6 +15,7 @@ from safl_bench.cli import main as cli_main
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.sources import bev as bev_module
 from safl_bench.sources import bev_source
+from safl_bench.views.render import build_views as render_views
 
 REVISIT = "Test/BevTiny-Revisit-v0"
 RANGES = "Test/BevTiny-BEVPlace-v0"
@@ -53,7 +54,7 @@ def test_sequence_reads_poses_times_and_assumes_10_hz_without_times(tmp_path: Pa
 def test_images_are_cached_and_views_are_value_over_255(bev_root: Path, safl_home: Path,
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     source = bev_source(bev_root)
-    views = source.build_views("00", None, np.arange(0, 40, 4), {"T0R0": None})["T0R0", "topview"]
+    views = render_views(source, "00", None, np.arange(0, 40, 4), {"T0R0": None})["T0R0", "topview"]
     assert views.shape == (10, 41, 41) and views.dtype == np.float32
     raw = np.asarray(__import__("PIL.Image", fromlist=["Image"]).open(bev_root / "00/imgs/000004.png"))
     np.testing.assert_array_equal(views[1], raw.astype(np.float32) / 255)
@@ -63,7 +64,7 @@ def test_images_are_cached_and_views_are_value_over_255(bev_root: Path, safl_hom
         raise AssertionError("decoded again instead of reading the cache")
 
     monkeypatch.setattr(bev_module, "decode_images", fail)
-    again = bev_source(bev_root).build_views("00", None, np.arange(0, 40, 4), {"c": None})["c", "topview"]
+    again = render_views(bev_source(bev_root), "00", None, np.arange(0, 40, 4), {"c": None})["c", "topview"]
     np.testing.assert_array_equal(views, again)
     (bev_root / "00" / "imgs" / "000003.png").touch()  # a changed file is a new key: decoded again
     with pytest.raises(AssertionError, match="decoded again"):
@@ -117,7 +118,7 @@ def test_bad_input_is_one_line_naming_the_file(bev_root: Path, safl_home: Path, 
     needle = _corrupt(bev_root, how)
     with pytest.raises(DataError) as info:
         source = bev_source(bev_root)
-        source.build_views("00", None, np.arange(40), {"c": None})
+        render_views(source, "00", None, np.arange(40), {"c": None})
     message = str(info.value)
     assert needle in message and "\n" not in message
 

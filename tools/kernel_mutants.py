@@ -1,7 +1,7 @@
 """Hand-made mutants of the matcher's numba kernels (opt-in, like tools/mutation.sh).
 
 mutmut never mutates a decorated function, so the ``@numba.njit`` kernels of
-`safl_bench.matching` (``_enhance_kernel``, ``_cand_range``, ``_search_kernel``) get no mutant
+`safl_bench.matching.matcher` (``_enhance_kernel``, ``_cand_range``, ``_search_kernel``) get no mutant
 from it (its trampolines could not run inside nopython code anyway). This script applies each
 mutation below to a copy of the package in a temporary folder and runs the matching tests
 against that copy, with a numba cache folder of the mutant's own: a kernel compiled from other
@@ -50,7 +50,7 @@ MUTANTS = [
 
 def run(i: int, old: str, new: str) -> bool:
     """True when the tests kill mutant i."""
-    source = (ROOT / "safl_bench" / "matching.py").read_text()
+    source = (ROOT / "safl_bench" / "matching" / "matcher.py").read_text()
     start = source.index("# --------------------------------------------------------------------------- kernels")
     end = source.index("# --------------------------------------------------------------------------- public API")
     kernels = source[start:end]
@@ -63,11 +63,11 @@ def run(i: int, old: str, new: str) -> bool:
         shutil.copytree(ROOT / "tests", work / "tests", ignore=shutil.ignore_patterns("__pycache__"))
         shutil.copy(ROOT / "pyproject.toml", work / "pyproject.toml")
         mutated = source[:start] + kernels.replace(old, new) + source[end:]
-        (work / "safl_bench" / "matching.py").write_text(mutated)
+        (work / "safl_bench" / "matching" / "matcher.py").write_text(mutated)
         env = dict(os.environ, NUMBA_CACHE_DIR=str(work / "numba-cache"), PYTHONPATH=str(work),
                    NUMBA_NUM_THREADS=os.environ.get("NUMBA_NUM_THREADS", "1"))
         probe = subprocess.run(
-            [sys.executable, "-c", "import safl_bench.matching as m; print(m.__file__)"],
+            [sys.executable, "-c", "import safl_bench.matching.matcher as m; print(m.__file__)"],
             cwd=work, env=env, capture_output=True, text=True, check=True)
         if not probe.stdout.strip().startswith(str(work)):  # the copy, never the checkout
             raise SystemExit(f"mutant {i}: imported {probe.stdout.strip()}, not the mutated copy")

@@ -22,8 +22,7 @@ import numpy as np
 
 from safl_bench.errors import ConfigError
 from safl_bench.sources import DataSource
-from safl_bench.views.mapbuild import build_views as build_scan_views
-from safl_bench.views.mapbuild import check_frames
+from safl_bench.views import mapbuild
 from safl_bench.views.resample import move_viewpoint
 
 Views = dict[tuple[str, str], np.ndarray | list[np.ndarray]]
@@ -41,8 +40,9 @@ def build_views(
     if source.renders != "scans":
         raise ConfigError(f"{source.label}: views made from {source.renders!r}; "
                           "a source renders 'scans' or 'images'")
-    return build_scan_views(source.sequence(name), config, frames, offsets, kinds,
-                            progress=progress)
+    # through the module, so that a test that replaces `mapbuild.build_views` sees every call
+    return mapbuild.build_views(source.sequence(name), config, frames, offsets, kinds,
+                                progress=progress)
 
 
 def _image_views(source: Any, name: str, frames: np.ndarray,
@@ -50,7 +50,7 @@ def _image_views(source: Any, name: str, frames: np.ndarray,
                  progress: bool) -> Views:
     for kind in kinds:
         source.check_kind(kind)
-    frames = check_frames(frames, len(source.sequence(name)), name)
+    frames = mapbuild.check_frames(frames, len(source.sequence(name)), name)
     steps = np.diff(frames)
     if len(frames) > 1 and steps[0] > 0 and (steps == steps[0]).all():  # a view: no copy
         images = source.images(name, progress=progress)[frames[0]:frames[-1] + 1:steps[0]]
