@@ -133,8 +133,7 @@ import torch.nn.functional as F
 
 from baselines.bevplace_net import GROUP_ROTATIONS, GROUP_SCALES, BevPlaceNet, channel_l2_normalize
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.method import Method, Views, as_topview
-from safl_bench.method_registry import register_method
+from safl_bench.methods.method import Method, Views, as_topview, register_method
 
 WEIGHTS_FILE = Path(__file__).parent / "weights" / "bevplace.safetensors"
 #: How results name the shipped file (by package, not by this machine's install path).
@@ -646,7 +645,7 @@ def read_authors_checkpoint(path: str | Path) -> dict[str, torch.Tensor]:
 
 def load_authors_checkpoint(path: str | Path, **params: Any) -> BevPlace:
     """A `BevPlace` running the weights of one of the authors' checkpoints (``*.pth.tar``)."""
-    from safl_bench.weights import file_sha256
+    from safl_bench.methods.weights import file_sha256
 
     state = read_authors_checkpoint(path)
     method = BevPlace(**params)
@@ -705,7 +704,7 @@ class BevPlace(Method):
         self.fast = bool(fast)
         self.net = BevPlaceNet()
         self._fast_cache: dict[int, _FastGeometry] = {}
-        from safl_bench.weights import file_sha256, load_tensors
+        from safl_bench.methods.weights import file_sha256, load_tensors
 
         tensors, _ = load_tensors(WEIGHTS_FILE)
         load_network_state(self.net, tensors, str(WEIGHTS_FILE))

@@ -184,7 +184,7 @@ def load_views(bev_root: str | None, sequence: str, frames: int) -> tuple[np.nda
     """`frames` views of 151 x 151: BEVPlace's images of `sequence` (evenly spaced over it), or
     synthetic views where no image folder is given (timing does not depend on the content)."""
     if bev_root is None:
-        from safl_bench.check import sample_views
+        from safl_bench.methods.check import sample_views
 
         return np.asarray(sample_views("topview", n=frames, size=SIZE, seed=0)), f"{frames} synthetic views"
     from safl_bench.sources.bev import decode_images, open_bev_sequence
@@ -205,10 +205,10 @@ def run(
     plain: bool = False,
 ) -> dict[str, Any]:
     """Every figure, JSON-ready: medians over `rounds` interleaved rounds, ratios per round."""
-    from safl_bench import timing
+    from safl_bench.run import timing
 
     if views.shape[1:] != (SIZE, SIZE):
-        from safl_bench.resample import fit_input
+        from safl_bench.views.resample import fit_input
 
         views = fit_input(views, SIZE)
     ours = bp.BevPlace(batch_size=batch_size)

@@ -27,8 +27,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from baselines.nets import Decoder, Encoder, JointCritic, init_weights
-from safl_bench.method_registry import register_method
-from safl_bench.training import AdversarialMethod
+from safl_bench.methods.method import register_method
+from safl_bench.methods.training import AdversarialMethod
 
 
 def bce(logits: torch.Tensor, target: float) -> torch.Tensor:

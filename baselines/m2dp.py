@@ -42,8 +42,7 @@ from threadpoolctl import ThreadpoolController
 
 from baselines._polar import quadrant_boundaries, sector_index_q
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.method import Method, Views, as_points
-from safl_bench.method_registry import register_method
+from safl_bench.methods.method import Method, Views, as_points, register_method
 
 NUM_AZIMUTHS = 4  # p
 NUM_ELEVATIONS = 16  # q

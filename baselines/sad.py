@@ -39,8 +39,7 @@ import numpy as np
 import torch
 
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.method import Method, Views, as_topview
-from safl_bench.method_registry import register_method
+from safl_bench.methods.method import Method, Views, as_topview, register_method
 
 NORMALISATIONS = ("range", "zscore")
 #: Tile of the difference-matrix kernel: queries x database descriptors (accumulator 16 KB).

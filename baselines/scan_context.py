@@ -39,8 +39,7 @@ from scipy.spatial import cKDTree
 
 from baselines._polar import boundary_vectors, sector_index
 from safl_bench.errors import ConfigError, DataError
-from safl_bench.method import Method, Views, as_points
-from safl_bench.method_registry import register_method
+from safl_bench.methods.method import Method, Views, as_points, register_method
 
 NUM_RINGS = 20
 NUM_SECTORS = 60

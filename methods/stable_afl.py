@@ -60,8 +60,8 @@ from torch import nn
 from baselines.bigan import bce
 from baselines.nets import CodeCritic, Decoder, Encoder, ImageCritic, JointCritic, init_weights
 from safl_bench.errors import ConfigError
-from safl_bench.method_registry import register_method
-from safl_bench.training import AdversarialMethod
+from safl_bench.methods.method import register_method
+from safl_bench.methods.training import AdversarialMethod
 
 JOINT_LOSSES = ("wasserstein", "lsgan", "jsd")
 SIDE_LOSSES = ("jsd", "wasserstein")

@@ -1,1 +1,1 @@
-"""Shipped trained weights (`<method name>.safetensors`), found by safl_bench.method_registry."""
+"""Shipped trained weights (`<method name>.safetensors`), found by safl_bench.methods.method."""
