@@ -18,6 +18,7 @@ import sys
 import time
 
 import numpy as np
+
 from safl_bench.localmap import make_local_map
 from safl_bench.mapconfig import MapConfig
 from safl_bench.topview import encode, pose_viewpoint, render

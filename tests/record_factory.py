@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+
+from safl_bench import metrics
 from safl_bench.provenance import Environment
 from safl_bench.records import (
     MethodInfo,
@@ -13,8 +15,6 @@ from safl_bench.records import (
     make_mode_result,
     mode_result_from_evaluation,
 )
-
-from safl_bench import metrics
 
 SYNTH_LABEL = "synthetic default (seed 0)"
 

@@ -7,6 +7,7 @@ import dataclasses
 from pathlib import Path
 
 from record_factory import make_record
+
 from safl_bench.matcher_presets import configure
 from safl_bench.records import ResultRecord, write_record
 

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from safl_bench import mapcache
 from safl_bench.bevdensity import (
     DENSITY_CAP,
     SCRIPT_MIN_COUNT,
@@ -17,14 +19,12 @@ from safl_bench.bevdensity import (
     density_views,
     offset_transform,
 )
+from safl_bench.errors import ConfigError
 from safl_bench.mapbuild import build_views
 from safl_bench.mapconfig import ENCODINGS, MapConfig, bev_density_config, config_for_encoding
 from safl_bench.noise import CLEAN, Condition
-from safl_bench.topview import encode, scan_topview
-
-from safl_bench import mapcache
-from safl_bench.errors import ConfigError
 from safl_bench.sources import kitti_source
+from safl_bench.topview import encode, scan_topview
 
 CFG = bev_density_config()
 C0 = 75

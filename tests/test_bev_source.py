@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import write_bev
-from safl_bench.resample import coverage, fit_input, move_viewpoint
 
 from safl_bench import tasks
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import ConfigError, DataError
+from safl_bench.resample import coverage, fit_input, move_viewpoint
 from safl_bench.sources import bev as bev_module
 from safl_bench.sources import bev_source
 from safl_bench.views.render import build_views as render_views

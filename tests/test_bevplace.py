@@ -11,15 +11,15 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
-from safl_bench.check import check_method, sample_views
-from safl_bench.method import Method
-from safl_bench.method_registry import make_method, shipped_weights_path
-from safl_bench.weights import file_sha256, load_tensors
 
 from baselines import bevplace
 from baselines.bevplace import BevPlace, load_authors_checkpoint
 from baselines.bevplace_net import BevPlaceNet
+from safl_bench.check import check_method, sample_views
 from safl_bench.errors import ConfigError, DataError
+from safl_bench.method import Method
+from safl_bench.method_registry import make_method, shipped_weights_path
+from safl_bench.weights import file_sha256, load_tensors
 
 AUTHORS_TENSORS = 42
 AUTHORS_PARAMETERS = 456_904

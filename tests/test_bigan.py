@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from safl_bench.check import check_method, sample_views
 
 from baselines.bigan import BiGAN
+from safl_bench.check import check_method, sample_views
 
 
 @pytest.fixture(autouse=True)

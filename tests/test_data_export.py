@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from safl_bench.mapbuild import build_views
-from safl_bench.mapconfig import bev_density_config
 
 from safl_bench.cli import main
+from safl_bench.mapbuild import build_views
+from safl_bench.mapconfig import bev_density_config
 from safl_bench.sources import bev_source, kitti_source
 from safl_bench.views.render import build_views as render_views
 

@@ -4,6 +4,7 @@ again; another configuration or a changed view is a miss."""
 from __future__ import annotations
 
 import numpy as np
+
 from safl_bench.descriptor_cache import cache_dir, cached_describe
 from safl_bench.method import Method, as_topview
 

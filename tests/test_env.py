@@ -10,12 +10,12 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from safl_bench.mapconfig import MapConfig
 from test_groundtruth import loop_twice
 
 import safl_bench  # noqa: F401  (registers the tasks with Gymnasium)
 from safl_bench import tasks
 from safl_bench.errors import ConfigError
+from safl_bench.mapconfig import MapConfig
 from safl_bench.matching import MatcherConfig, seqslam
 from safl_bench.tasks import TaskSpec
 from safl_bench.tasks.agent import MatcherAgent

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from safl_bench.groundtruth import GroundTruth
-from safl_bench.metrics import AMBIGUOUS, CORRECT, WRONG, NoPositivesError
 from test_evaluation_values import MatrixMethod  # one stand-in method for both files
 
 from safl_bench.evaluation import EvaluationConfig, evaluate_method, match_outcomes, score_matches
+from safl_bench.groundtruth import GroundTruth
 from safl_bench.matching import MatcherConfig, match, single_frame
+from safl_bench.metrics import AMBIGUOUS, CORRECT, WRONG, NoPositivesError
 
 
 def revisit_truth() -> GroundTruth:

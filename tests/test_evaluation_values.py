@@ -8,8 +8,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from safl_bench.groundtruth import GroundTruth
-from safl_bench.metrics import AMBIGUOUS, CORRECT, WRONG, true_place_ranks
 
 from safl_bench import descriptor_cache, evaluation
 from safl_bench.errors import ConfigError, DataError
@@ -23,7 +21,9 @@ from safl_bench.evaluation import (
     subset_result,
     subset_truth,
 )
+from safl_bench.groundtruth import GroundTruth
 from safl_bench.matching import MatcherConfig, match, single_frame
+from safl_bench.metrics import AMBIGUOUS, CORRECT, WRONG, true_place_ranks
 
 
 class MatrixMethod:

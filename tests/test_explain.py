@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from safl_bench.mapconfig import MapConfig
-from safl_bench.method_registry import make_method
 
 from safl_bench import explain, matching, runner, tasks
 from safl_bench.cli import main
 from safl_bench.errors import DataError
+from safl_bench.mapconfig import MapConfig
+from safl_bench.method_registry import make_method
 
 TINY = "Test/TinyExplain-T5R1-v0"
 

@@ -153,6 +153,7 @@ def test_fidelity_cli_end_to_end_on_tiny_data(kitti_root: Path, safl_home: Path,
 
 def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
     from record_factory import make_record
+
     from safl_bench.records import write_record
 
     results, extra = tmp_path / "results", tmp_path / "committed"

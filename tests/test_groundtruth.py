@@ -6,6 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from safl_bench.cli import main as cli_main
+from safl_bench.errors import ConfigError, DataError
 from safl_bench.groundtruth import (
     EXCLUDED,
     FP,
@@ -16,9 +19,6 @@ from safl_bench.groundtruth import (
     loop_pairs,
     read_poses,
 )
-
-from safl_bench.cli import main as cli_main
-from safl_bench.errors import ConfigError, DataError
 
 LAP = 160  # frames per lap of a 40 m x 40 m square, 1 m apart
 

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from safl_bench.errors import ConfigError, DataError
 from safl_bench.groundtruth import (
     DEFAULT_PERIOD_S,
     EXCLUDED,
@@ -19,8 +21,6 @@ from safl_bench.groundtruth import (
     read_poses,
     read_times,
 )
-
-from safl_bench.errors import ConfigError, DataError
 
 
 def line(xs: list[float]) -> np.ndarray:

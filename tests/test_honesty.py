@@ -15,11 +15,11 @@ from pathlib import Path
 
 import pytest
 import torch
-from safl_bench.method_registry import method_class
 
 from safl_bench import synth, tasks
 from safl_bench.cli.train import load_training_maps
 from safl_bench.evaluation import evaluate_method
+from safl_bench.method_registry import method_class
 from safl_bench.sources import kitti_source
 
 SMALL = synth.SynthConfig(frames=160, grid_lines=3, azimuth_res_deg=1.0)

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import pytest
 from record_factory import SYNTH_LABEL, make_record
-from safl_bench.records import ResultRecord, load_records, write_record
 
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import DataError
@@ -23,6 +22,7 @@ from safl_bench.leaderboard.tables import (
     time_table,
 )
 from safl_bench.leaderboard.training_logs import read_training_log
+from safl_bench.records import ResultRecord, load_records, write_record
 
 
 def _paper_records() -> list[ResultRecord]:

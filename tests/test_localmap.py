@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from safl_bench.localmap import HitTable, keys_to_centres, make_local_map, voxel_keys
 from safl_bench.mapconfig import MapConfig
-from safl_bench.topview import encode, pose_viewpoint, render
-
 from safl_bench.sources.kitti import open_sequence
+from safl_bench.topview import encode, pose_viewpoint, render
 
 BACKENDS = ["voxel", "octomap"]
 

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from safl_bench.mapbuild import build_views, select_frames
-from safl_bench.mapconfig import MapConfig
-from safl_bench.noise import CLEAN, Condition
 
 from safl_bench import mapcache
 from safl_bench.errors import ConfigError
+from safl_bench.mapbuild import build_views, select_frames
+from safl_bench.mapconfig import MapConfig
+from safl_bench.noise import CLEAN, Condition
 from safl_bench.sources import kitti_source
 
 FRAMES = np.array([3, 7, 11])

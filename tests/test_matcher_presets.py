@@ -10,16 +10,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from safl_bench.groundtruth import GroundTruth
-from safl_bench.mapconfig import MapConfig
-from safl_bench.matching_loop import ref_enhance
-from safl_bench.method import Method
 
 from safl_bench import matcher_presets, matching, tasks
 from safl_bench.cli import main
 from safl_bench.errors import ConfigError
 from safl_bench.evaluation import EvaluationConfig, evaluate_method, same_settings
+from safl_bench.groundtruth import GroundTruth
+from safl_bench.mapconfig import MapConfig
 from safl_bench.matching import MatcherConfig
+from safl_bench.matching_loop import ref_enhance
+from safl_bench.method import Method
 
 #: MatcherConfig().to_dict() before the presets existed: records made then hold exactly this.
 OLD_DEFAULTS = {

@@ -6,12 +6,12 @@ import json
 
 import numpy as np
 import pytest
-from safl_bench.matching_loop import ref_enhance, ref_match
 from scipy.spatial.distance import cdist
 
 from safl_bench import distance, matching
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.matching import MatcherConfig
+from safl_bench.matching_loop import ref_enhance, ref_match
 
 
 def assert_same(res: matching.MatchResult, ref, rtol: float = 1e-9) -> None:

@@ -9,11 +9,11 @@ import warnings
 
 import numpy as np
 import pytest
-from safl_bench.matching_loop import ref_enhance
 
 from safl_bench import matching
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.matching import MatcherConfig, match, seqslam, single_frame
+from safl_bench.matching_loop import ref_enhance
 
 # --------------------------------------------------------------------------- grid and offsets
 

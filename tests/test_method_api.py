@@ -8,13 +8,13 @@ import pickle
 import numpy as np
 import pytest
 import torch
-from safl_bench.check import MethodCheckError, check_method, sample_views
-from safl_bench.method import Method, as_topview
-from safl_bench.weights import load_tensors, save_tensors
 
 from safl_bench import method_registry as reg
+from safl_bench.check import MethodCheckError, check_method, sample_views
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import ConfigError, DataError, RegistryError
+from safl_bench.method import Method, as_topview
+from safl_bench.weights import load_tensors, save_tensors
 
 
 @pytest.fixture(autouse=True)

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from safl_bench.check import sample_views
-from safl_bench.method_registry import make_method
-
 from safl_bench import method_bench
+from safl_bench.check import sample_views
 from safl_bench.cli import main
+from safl_bench.method_registry import make_method
 
 
 def test_bench_method_reports_batch1_batched_and_matrix() -> None:

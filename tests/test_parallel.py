@@ -12,18 +12,18 @@ from pathlib import Path
 import pytest
 from conftest import write_kitti
 from parallel_methods import KillOnMarker
-from safl_bench.mapbuild import select_frames
-from safl_bench.mapconfig import MapConfig
-from safl_bench.method_registry import make_method
-from safl_bench.noise import CLEAN, Condition
-from safl_bench.parallel import Parallel, run_jobs
 from test_runner import options, register_tiny
 
 from safl_bench import mapcache, runner
 from safl_bench.cli import main
 from safl_bench.errors import ConfigError
 from safl_bench.evaluation import EvaluationConfig
+from safl_bench.mapbuild import select_frames
+from safl_bench.mapconfig import MapConfig
 from safl_bench.matching import MatcherConfig
+from safl_bench.method_registry import make_method
+from safl_bench.noise import CLEAN, Condition
+from safl_bench.parallel import Parallel, run_jobs
 from safl_bench.sources import kitti_source
 
 TASKS = ("Test/ParA-T1R1-v0", "Test/ParA-T5R1-v0", "Test/ParA-T1R2-v0")

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from safl_bench.check import check_method, sample_views
 
 from safl_bench import method_registry as reg
+from safl_bench.check import check_method, sample_views
 
 FIXTURE = Path(__file__).parent / "fixtures" / "plugin_pkg"
 

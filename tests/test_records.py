@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from record_factory import make_record
+
+from safl_bench.errors import DataError
 from safl_bench.provenance import collect_environment
 from safl_bench.records import (
     MAX_CURVE_POINTS,
@@ -22,8 +24,6 @@ from safl_bench.records import (
     record_path,
     write_record,
 )
-
-from safl_bench.errors import DataError
 
 
 def test_round_trip_through_file(tmp_path: Path) -> None:
@@ -149,10 +149,9 @@ def test_environment_is_collected() -> None:
 
 
 def test_records_built_from_a_task_spec_and_an_evaluation(tmp_path: Path) -> None:
+    from safl_bench.matching import MatcherConfig
     from safl_bench.metrics import evaluate
     from safl_bench.records import MethodInfo, mode_result_from_evaluation, new_record, task_info
-
-    from safl_bench.matching import MatcherConfig
     from safl_bench.tasks import spec
 
     rng = np.random.default_rng(0)
@@ -183,6 +182,7 @@ def test_version_1_records_are_kept_only_where_version_2_scores_the_same(tmp_pat
     import json
 
     from record_factory import make_record
+
     from safl_bench.records import load_records, write_record
 
     paper = write_record(tmp_path, make_record("a"))

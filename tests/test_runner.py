@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import write_kitti
-from safl_bench.mapconfig import MapConfig
-from safl_bench.method_registry import make_method
-from safl_bench.records import load_record
 
 from safl_bench import runner, tasks
 from safl_bench.cli import main
+from safl_bench.mapconfig import MapConfig
+from safl_bench.method_registry import make_method
+from safl_bench.records import load_record
 
 TASKS = ("Test/TinyRun-T1R1-v0", "Test/TinyRun-T5R1-v0")
 

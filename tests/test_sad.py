@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from safl_bench.check import check_method, sample_views
 
 from baselines.sad import SAD, patch_normalise, sad_matrix, sad_matrix_cdist
+from safl_bench.check import check_method, sample_views
 from safl_bench.errors import ConfigError, DataError
 
 

@@ -7,12 +7,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from safl_bench.mapconfig import MapConfig
-from safl_bench.method_registry import make_method
 
 from safl_bench import runner, tasks
 from safl_bench.cli import main
 from safl_bench.errors import ConfigError
+from safl_bench.mapconfig import MapConfig
+from safl_bench.method_registry import make_method
 from safl_bench.tasks import spec
 from safl_bench.tasks.spec import DEFAULT_NOISY_SEEDS
 

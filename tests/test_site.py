@@ -8,7 +8,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from safl_bench.records import load_records
 from site_board import BEV_LABEL, write_board
 from site_html import markdown_rows, read_page
 
@@ -23,6 +22,7 @@ from safl_bench.leaderboard.headline import (
     update_readme,
 )
 from safl_bench.leaderboard.site import page_file, write_site
+from safl_bench.records import load_records
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -67,6 +67,7 @@ def test_cells_show_their_interval_and_bold_only_beyond_the_noise(tmp_path: Path
     import dataclasses
 
     from record_factory import scored_record
+
     from safl_bench.matcher_presets import configure
 
     paper = configure("paper").to_dict()

@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 import torch
-from safl_bench.check import check_method, sample_views
-from safl_bench.method import Method
-from safl_bench.training import save_reconstructions
 
 from methods.stable_afl import StableAFL
+from safl_bench.check import check_method, sample_views
 from safl_bench.errors import ConfigError, DataError
+from safl_bench.method import Method
+from safl_bench.training import save_reconstructions
 
 
 @pytest.fixture(autouse=True)

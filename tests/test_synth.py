@@ -238,7 +238,6 @@ def test_a_parked_car_is_seen_through_its_windows() -> None:
     from its outside. Its top is shaped (bonnet and boot below the roof)."""
     from safl_bench.bevdensity import density_counts
     from safl_bench.mapconfig import bev_density_config
-
     from safl_bench.synth import materials as M
     from safl_bench.synth.lidar import Lidar
     from safl_bench.synth.world import World, _Plan, _Town

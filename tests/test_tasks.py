@@ -13,15 +13,15 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
-from safl_bench.mapbuild import build_views
-from safl_bench.mapconfig import MapConfig
-from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition, sample_offsets
 from scipy import stats
 
 import safl_bench  # noqa: F401  (registers the built-in tasks)
 from safl_bench import tasks
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import ConfigError, DataError, RegistryError
+from safl_bench.mapbuild import build_views
+from safl_bench.mapconfig import MapConfig
+from safl_bench.noise import CLEAN, PAPER_CONDITIONS, Condition, sample_offsets
 from safl_bench.tasks import TaskSpec
 from safl_bench.tasks.builtin import SYNTH_DATA_VERSIONS, TASK_VERSION, superseded
 
@@ -233,9 +233,8 @@ def test_an_old_synthetic_task_cannot_be_materialised(tmp_path: Path) -> None:
 def test_an_old_synthetic_task_cannot_be_run(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from safl_bench.method_registry import make_method
-
     from safl_bench import runner
+    from safl_bench.method_registry import make_method
 
     assert cli_main(["run", "--method", "sad", "--task", "SAFL/Synth00-T1R1-v0",
                      "--results", str(tmp_path), "--quiet"]) == 2

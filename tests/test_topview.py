@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from safl_bench.mapconfig import MapConfig
 from safl_bench.topview import encode, noisy_viewpoints, render, scan_topview, view_points
 

@@ -88,9 +88,8 @@ def test_paired_differences_resolve_a_better_method_and_tie_a_method_with_itself
 
 
 def test_compare_prints_paired_differences_and_a_verdict(tmp_path, capsys) -> None:
-    from safl_bench.records import write_record
-
     from safl_bench.cli import main
+    from safl_bench.records import write_record
 
     for name, skill in (("good", 0.9), ("bad", 0.3)):
         for seed in (0, 1):

@@ -7,6 +7,7 @@ import signal
 from pathlib import Path
 
 import numpy as np
+
 from safl_bench.method import Method, as_topview
 
 
