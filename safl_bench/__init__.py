@@ -6,6 +6,10 @@ The package holds one folder per stage, in the order data flows (docs/architectu
 `analysis`, `bench` (every benchmark) and `cli`. At the top stay only this face, `errors` and
 `paths`.
 
+The names a plug-in and a script need are on the face, imported on first use (so that
+`import safl_bench` loads neither torch nor the stages): ``from safl_bench import Method,
+as_topview, register_method, make_method, check_method, load_record, load_records``.
+
 The modules that lived at the top before (``safl_bench.metrics``, ``safl_bench.method_registry``
 ...) still import under their old names: `MOVED_MODULES` maps each to its new path and an
 import finder hands back the very module object of the new path, so code, plug-ins and
@@ -20,10 +24,14 @@ import importlib
 import importlib.machinery
 import sys
 from types import ModuleType
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
     from importlib.abc import Loader
+
+    from safl_bench.methods.check import check_method
+    from safl_bench.methods.method import Method, as_topview, make_method, register_method
+    from safl_bench.results.records import load_record, load_records
 
 __version__ = "0.1.0"
 
@@ -90,3 +98,23 @@ if not any(isinstance(f, _MovedModuleFinder) for f in sys.meta_path):
 # Register the built-in tasks (with Gymnasium too, lazily: nothing is loaded until a task is made),
 # so that `gymnasium.make("SAFL/Synth00-T1R1-v4")` works after `import safl_bench`.
 from safl_bench import tasks as _tasks  # noqa: E402, F401
+
+#: The package face: name -> the module that defines it (imported on first use).
+_FACE = {
+    "Method": "safl_bench.methods.method",
+    "as_topview": "safl_bench.methods.method",
+    "register_method": "safl_bench.methods.method",
+    "make_method": "safl_bench.methods.method",
+    "check_method": "safl_bench.methods.check",
+    "load_record": "safl_bench.results.records",
+    "load_records": "safl_bench.results.records",
+}
+
+__all__ = ["MOVED_MODULES", "Method", "__version__", "as_topview", "check_method", "load_record",
+           "load_records", "make_method", "register_method"]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _FACE:
+        return getattr(importlib.import_module(_FACE[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

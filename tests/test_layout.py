@@ -49,3 +49,16 @@ def test_import_safl_bench_loads_no_stage_it_does_not_need() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=PACKAGE.parent)
     assert out.stdout.strip() == "[]"
+
+
+def test_the_package_face_names_what_plug_ins_use() -> None:
+    from safl_bench.methods.check import check_method
+    from safl_bench.methods.method import Method, register_method
+    from safl_bench.results.records import load_records
+
+    face = set(safl_bench.__all__) - {"MOVED_MODULES", "__version__"}
+    assert face == set(safl_bench._FACE)
+    assert (safl_bench.Method, safl_bench.register_method) == (Method, register_method)
+    assert (safl_bench.check_method, safl_bench.load_records) == (check_method, load_records)
+    with pytest.raises(AttributeError):
+        _ = safl_bench.no_such_name
