@@ -796,7 +796,6 @@ def record_schema() -> dict[str, Any]:
     schema = TypeAdapter(ResultRecord).json_schema(mode="validation")
     schema["required"] = sorted({*schema.get("required", []), "schema"})
     return {"$schema": "https://json-schema.org/draft/2020-12/schema",
-            "$id": "https://safl-bench/record.schema.json",
             "title": "safl-bench result record",
             "description": f"One run of one method on one task with one seed, schema version "
                            f"{SCHEMA_VERSION} (safl_bench.results.records).",
