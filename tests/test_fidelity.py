@@ -252,3 +252,22 @@ def test_mixed_weights_are_named() -> None:
     assert set(mixed) == {"bigan"}  # bevplace's other weights gave no result: nothing ranked with them
     assert mixed["bigan"] == {"S": "bigan.safetensors 92061236b6c2", "R1": "bigan-bev.safetensors 5aae9d521a8f",
                               "R2": "bigan-bev.safetensors 5aae9d521a8f"}
+
+
+def test_the_report_prints_each_pairs_difference_interval_and_verdict() -> None:
+    from safl_bench.cli.data_fidelity import _order_rows, _order_text
+
+    results = {
+        "strong": {"S": _scored("strong", "S", 0.95)},
+        "weak": {"S": _scored("weak", "S", 0.2)},
+        "bare": {"S": F.MethodResult("bare", "S", None, 0.5, "record")},
+    }
+    orders = {"S": F.pair_orders(results, "S"), "R": []}
+    rows = _order_rows(orders, ["R", "S"])
+    assert rows[0] == ["pair (first - second)", "R", "S"]
+    by_pair = {r[0]: r[1:] for r in rows[1:]}
+    (resolved,) = [o for o in orders["S"] if (o.first, o.second) == ("strong", "weak")]
+    iv = resolved.difference
+    assert by_pair["strong - weak"] == ["n/a", f"{iv.mean:.3f} [{iv.low:.3f}, {iv.high:.3f}] strong > weak"]
+    assert by_pair["bare - strong"][1] == "n/a (no per-query outcomes) tied"
+    assert _order_text(resolved).endswith("strong > weak")

@@ -330,6 +330,9 @@ def main(args: argparse.Namespace) -> int:
         print(_table(_order_rows(orders, tasks)))
     print("Kendall tau-b of the orders beyond the noise (ties counted), synthetic vs " + ", ".join(
         f"{t.split('/')[-1] if t != 'mean' else 'the real mean'} {_fmt(v)}" for t, v in taus.items()))
+    if any(orders.values()) and any(v is None for v in taus.values()):
+        print("  (n/a: on one side every pair of the methods both sides have is tied, so there is "
+              "no order to correlate)")
     print("goals: " + "; ".join(
         f"{g.name} {_fmt(g.value, pct=g.name == 'nonzero_fraction')} (goal {g.target}): {'met' if g.met else 'NOT met'}"
         for g in targets))
