@@ -10,8 +10,9 @@ standard deviation instead (OpenSeqSLAM's other mode). The descriptor is the fla
 
 distance: the sum of absolute differences divided by the number of pixels (SeqSLAM's
 difference matrix). `sad_matrix` computes the sums in a numba kernel (parallel over tiles of 32
-queries x 128 database descriptors, vectorised across the 128 database descriptors of a tile)
-and divides by the number of pixels in float32 afterwards.
+queries x 128 database descriptors, vectorised across the 128 database descriptors of a tile;
+the database packed by `pack_database` into one contiguous (D, 128) panel per tile) and
+divides by the number of pixels in float32 afterwards.
 
 Why it is exact: the records were computed with torch.cdist(p=1), whose CPU kernel sums
 |q_x - d_x| for one pair in float32, one term after the other, x = 0, 1, ..., D - 1 (checked:
@@ -19,15 +20,24 @@ bitwise equal to that sequential sum, unequal to any 4- to 32-lane or pairwise r
 kernel keeps that order for every pair: the SIMD lanes hold different pairs, never different
 terms of one sum, and it is compiled without fastmath, so no sum is reassociated. It is
 therefore bitwise equal to torch.cdist(p=1) (tested against a plain numpy loop and against
-cdist, odd sizes included; checked on the 4541 x 4541 matrix of KITTI 00's real top views).
+cdist, odd sizes included; checked on the 4541 x 4541 matrix; a committed record,
+sad@1 on SAFL/BEVKITTI00-T1R1-v0 seed 0, recomputed with it is identical in every field of
+its results).
 Why it is faster: cdist's kernel runs one pair at a time, a scalar loop; the tile (a 16 KB
-accumulator, 128 database columns of the transposed database read row by row) stays in L1/L2
-and each database row is reused by 32 queries. `safl-bench bench methods --method sad` times
-it against cdist in the same run (4541 x 4541 x 1024, about 21 G absolute differences). On the
-2-core AMD EPYC development machine (AVX2), shared: 6.6-7.2x faster than cdist in every run
-(1.6 s against 11.3 s at load average 1.5; 7.2 s against 47.4 s at load 6.6 on KITTI 00's real
-descriptors; 12.2 s against 83.6 s at load 8 on all 4541 frames of 00, bitwise equal), so
-about 1.3-1.4 s where cdist takes its idle 9.0 s.
+accumulator, the tile's panel read row by row, each row reused by 32 queries) stays in L1/L2.
+
+Speed: `safl-bench bench methods --method sad` times it against cdist in the same run (4541 x
+4541 x 1024, 21.1 G absolute differences) and against the bound those differences set at this
+CPU's vector rate, measured just before each of 3 rounds by `absdiff_rate` (the kernel's own
+accumulate on one cache-resident tile, so only the arithmetic limits it: about 23 G per
+CPU-second on this AVX2 Zen 3 core, which fits the 8 a cycle of its two 256-bit float-add
+pipes at about 2.9 GHz; the clock is not measured).
+One run on the 2-core AMD EPYC development machine (AVX2 and FMA, no AVX-512), shared, load
+average 6-11: the matrix 2.22 s against 33.05 s with cdist (14.9x, bitwise equal), and 1.53x
+the bound by wall time (2.89 s against 1.84 s), 1.48x by CPU time (1.36 s against 0.90 s).
+Where cdist takes its idle 9.0 s that is about 0.6 s. Packing the panels made the kernel about
+1.1-1.3x faster than the former unpacked one (0.59-0.72 s against 0.80-0.83 s, interleaved,
+load 2-3).
 """
 
 from __future__ import annotations
