@@ -108,6 +108,31 @@ the fast path's time; the authors' code is itself within about 1.6x of the bound
 CPU 2x its throughput would need fewer multiply-adds than the network has; the bound (at most
 1.3x) is the target reached. The fused instance-norm kernel alone made the fast path
 1.2x faster (median of 5 interleaved rounds, one thread).
+A later run (8 images, 3 interleaved rounds, one thread, load average 10): ours 344 CPU ms per
+frame batched (698 ms wall), the authors' code 480 (976): 1.40x their throughput by CPU time,
+1.41x by wall time; the bound 278 CPU ms (95.1 GFLOP/s per CPU-second): ours 1.21x it by CPU
+time, 1.36x by wall time (the wall-clock rate of the probe and of the pipeline are taken at
+different moments of a loaded machine, so the CPU-time ratio is the one to quote).
+Where the time goes (one thread, CPU ms per frame, batch 4): convolutions about 300 of 342
+(the group CNN's at 85-93 GFLOP/s per CPU-second, the per-copy CNN's 5 x 5 at 77-98 in
+isolation); of the rest, instance norm 19, point sampling 8, average pooling 6, the warp's
+gather 3. Tried and measured, not kept (descriptors unchanged unless said):
+  - bf16 (torch.autocast or bf16 tensors): this host's CPU has no AVX-512 BF16; a bf16 grouped
+    3 x 3 convolution ran 10x slower than float32 (9-10 against 86-93 GFLOP/s), so no opt-in
+    was added and its effect on Recall@1 was not measured;
+  - weights prepacked channels-last: no change (1.00x, four interleaved rounds);
+  - other chunk sizes (CNN_CHUNK_BYTES 16 MB or one frame; 64, 256 or 1024 points): within
+    noise or slower;
+  - the group CNN's 3 x 3 convolutions as unfold + batched GEMM: 4x slower than oneDNN;
+  - the one-channel first convolution as unfold + GEMM or a numba kernel writing channels-last:
+    1.5-6x slower than oneDNN's convolution plus the layout copy;
+  - instance norm, ReLU and the 2 x 2 average pool as one numba kernel (bitwise equal): 1.05x
+    on that step, about 1 ms a frame, not worth a second kernel;
+  - torch.compile: not tried; the convolutions (about 87 % of the time) would still run as the
+    same oneDNN calls, leaving at most the 13 % around them.
+2x the authors' throughput is out of reach on this CPU: their code is 1.7x the bound by CPU time
+(480 against 278 ms), so 2x would need 0.86x the bound, fewer multiply-adds than the network
+has at the measured convolution rate.
 Earlier figures (another host of the development machine, with AVX-512; 2 threads, median of
 15): 78 ms per frame at batch 1, 13.5 frames/s batched (batch_size 4); the plain port
 110-130 ms; one thread: 153 ms (plain 200-275 ms); a 16 -> 32 5 x 5 channels-last convolution

@@ -68,6 +68,7 @@ MOVED_MODULES: dict[str, str] = {
     "safl_bench.method_bench": "safl_bench.bench.method_bench",
     "safl_bench.source_bench": "safl_bench.bench.source_bench",
     "safl_bench.parallel_bench": "safl_bench.bench.parallel_bench",
+    "safl_bench.seeds_bench": "safl_bench.bench.seeds_bench",
     "safl_bench.explain": "safl_bench.analysis.explain",
     "safl_bench.fidelity": "safl_bench.analysis.fidelity",
 }

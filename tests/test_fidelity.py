@@ -100,17 +100,72 @@ def test_goals_check_each_target() -> None:
     assert not {g.name: g.met for g in F.goals(0.0, [0.063, 0.074], 0.082, 1.0)}["nonzero_fraction"]
 
 
-def test_ranking_tau() -> None:
-    def res(m: str, t: str, f1: float | None) -> F.MethodResult:
-        return F.MethodResult(m, t, None, f1, "record")
+def _scored(m: str, t: str, skill: float, variant: int = 0, seed: int = 0) -> F.MethodResult:
+    """A method's single-frame result on task `t` from per-query outcomes (`task_outcomes`: the
+    methods of one task share its queries and true places; `seed` picks the task's queries)."""
+    from record_factory import task_outcomes
 
-    f1 = {"a": (0.9, 0.8, 0.7), "b": (0.5, 0.4, 0.3), "c": (0.7, 0.9, 0.1), "d": (None, 0.2, 0.2)}
-    results = {m: {t: res(m, t, v) for t, v in zip(("S", "R1", "R2"), vals, strict=True)} for m, vals in f1.items()}
+    from safl_bench.metrics import evaluate_outcomes
+
+    o = task_outcomes(seed, skill, variant)
+    return F.MethodResult(m, t, None, evaluate_outcomes(o).f1_max, "record", outcomes=[o])
+
+
+def test_tau_b_of_pair_orders_is_kendalls_tau_b_with_ties() -> None:
+    from itertools import combinations
+
+    from scipy.stats import kendalltau
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x, y = rng.integers(0, 3, 7), rng.integers(0, 4, 7)
+        pairs = list(combinations(range(7), 2))
+        ox = [int(np.sign(x[i] - x[j])) for i, j in pairs]
+        oy = [int(np.sign(y[i] - y[j])) for i, j in pairs]
+        expected = kendalltau(x, y).statistic
+        got = F._tau_b(ox, oy)
+        assert (got is None) == (not np.isfinite(expected))
+        if got is not None:
+            assert got == pytest.approx(expected)
+
+
+def test_ranking_tau_counts_unresolved_orders_as_ties() -> None:
+    # S: strong > mid > weak, each resolved; R1: strong and mid of the same skill (other draws),
+    # so their order is not beyond the noise whatever their F1max says: a tie on that side
+    results = {
+        "strong": {"S": _scored("strong", "S", 0.95), "R1": _scored("strong", "R1", 0.95, seed=1)},
+        "mid": {"S": _scored("mid", "S", 0.6), "R1": _scored("mid", "R1", 0.95, variant=1, seed=1)},
+        "weak": {"S": _scored("weak", "S", 0.2), "R1": _scored("weak", "R1", 0.2, seed=1)},
+    }
+    orders = {(o.first, o.second): o for o in F.pair_orders(results, "R1")}
+    assert set(orders) == {("mid", "strong"), ("mid", "weak"), ("strong", "weak")}
+    tied = orders["mid", "strong"]
+    assert tied.order == 0 and tied.verdict == "tied" and not tied.difference.excludes_zero()
+    assert tied.difference.mean != 0  # the means differ, the noise decides nothing
+    assert orders["strong", "weak"].order == 1 and orders["mid", "weak"].verdict == "mid > weak resolved"
+    s_orders = {(o.first, o.second): o.order for o in F.pair_orders(results, "S")}
+    assert s_orders == {("mid", "strong"): -1, ("mid", "weak"): 1, ("strong", "weak"): 1}
+    taus = F.ranking_tau(results, "S", ["R1"])
+    # pairs (S, R1): (-1, 0), (1, 1), (1, 1): tau-b = 2 / sqrt(3 * 2)
+    assert taus["R1"] == pytest.approx(2 / np.sqrt(6)) and taus["mean"] == pytest.approx(2 / np.sqrt(6))
+    # a second real task that reverses mid and weak: across the real tasks that pair is a tie
+    results["mid"]["R2"] = _scored("mid", "R2", 0.2, seed=2)
+    results["weak"]["R2"] = _scored("weak", "R2", 0.6, seed=2)
+    results["strong"]["R2"] = _scored("strong", "R2", 0.95, seed=2)
     taus = F.ranking_tau(results, "S", ["R1", "R2"])
-    # d has no synthetic value and is left out; R1 orders a, b, c as c > a > b vs S a > c > b
-    assert taus["R1"] == pytest.approx(1 / 3)
-    assert taus["R2"] == pytest.approx(1 / 3)
-    assert taus["mean"] == pytest.approx(1.0)  # means 0.75, 0.35, 0.5: the same order as S
+    assert taus["mean"] == pytest.approx(1 / np.sqrt(3))  # only strong > weak agrees: 1 / sqrt(3 * 1)
+
+
+def test_pairs_without_outcomes_are_ties_and_all_ties_give_no_tau() -> None:
+    def bare(m: str, t: str, f1: float) -> F.MethodResult:
+        return F.MethodResult(m, t, None, f1, "record")  # metrics version 1: no per-query outcomes
+
+    results = {m: {t: bare(m, t, v) for t in ("S", "R1")} for m, v in (("a", 0.9), ("b", 0.5))}
+    (order,) = F.pair_orders(results, "R1")
+    assert order.order == 0 and order.difference is None
+    assert F.ranking_tau(results, "S", ["R1"]) == {"R1": None, "mean": None}
+    results["c"] = {"S": F.MethodResult("c", "S", None, None, "missing")}  # no value: left out
+    assert [(o.first, o.second) for o in F.pair_orders(results, "S")] == [("a", "b")]
 
 
 def test_fidelity_cli_needs_real_data(monkeypatch: pytest.MonkeyPatch, tmp_path: Path, bev_root: Path,
@@ -170,9 +225,9 @@ def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
     assert pr["sad"]["SAFL/BEVKITTI02-Revisit-v0"].f1_max == pytest.approx(0.25)  # single-frame: f1 * 0.5
     assert pr["bigan"]["SAFL/Synth00-Revisit-v4"].recall_at_1 == pytest.approx(0.25)
     assert pr["bevplace"]["SAFL/BEVKITTI00-Revisit-v0"].status == "missing"
+    assert pr["bigan"]["SAFL/Synth00-Revisit-v4"].outcomes is None  # these records hold none
     taus = F.ranking_tau(pr, "SAFL/Synth00-Revisit-v4", tasks)
-    assert taus["SAFL/BEVKITTI02-Revisit-v0"] == pytest.approx(1.0)
-    assert taus["SAFL/BEVKITTI00-Revisit-v0"] == pytest.approx(1 / 3)
+    assert taus == dict.fromkeys([*tasks, "mean"])  # no outcomes: no order beyond the noise
 
 
 def test_mixed_weights_are_named() -> None:
@@ -197,3 +252,22 @@ def test_mixed_weights_are_named() -> None:
     assert set(mixed) == {"bigan"}  # bevplace's other weights gave no result: nothing ranked with them
     assert mixed["bigan"] == {"S": "bigan.safetensors 92061236b6c2", "R1": "bigan-bev.safetensors 5aae9d521a8f",
                               "R2": "bigan-bev.safetensors 5aae9d521a8f"}
+
+
+def test_the_report_prints_each_pairs_difference_interval_and_verdict() -> None:
+    from safl_bench.cli.data_fidelity import _order_rows, _order_text
+
+    results = {
+        "strong": {"S": _scored("strong", "S", 0.95)},
+        "weak": {"S": _scored("weak", "S", 0.2)},
+        "bare": {"S": F.MethodResult("bare", "S", None, 0.5, "record")},
+    }
+    orders = {"S": F.pair_orders(results, "S"), "R": []}
+    rows = _order_rows(orders, ["R", "S"])
+    assert rows[0] == ["pair (first - second)", "R", "S"]
+    by_pair = {r[0]: r[1:] for r in rows[1:]}
+    (resolved,) = [o for o in orders["S"] if (o.first, o.second) == ("strong", "weak")]
+    iv = resolved.difference
+    assert by_pair["strong - weak"] == ["n/a", f"{iv.mean:.3f} [{iv.low:.3f}, {iv.high:.3f}] strong > weak"]
+    assert by_pair["bare - strong"][1] == "n/a (no per-query outcomes) tied"
+    assert _order_text(resolved).endswith("strong > weak")

@@ -21,6 +21,11 @@ def test_bench_method_reports_batch1_batched_and_matrix() -> None:
     assert "with torch.cdist(p=1) in the same run" in method_bench.format_results([result])
     table = method_bench.format_results([result])
     assert table.splitlines()[1].split()[:2] == ["sad", "topview"]
+    bound = result["matrix"]["bound"]  # its absolute differences at the vector rate measured just before
+    assert bound["rounds"] == 1 and bound["absdiffs"] == 30 * 30 * 32 * 32
+    assert bound["bound_s"] == bound["absdiffs"] / bound["rate_per_s"] and bound["rate_per_s"] > 0
+    assert bound["ratio"] == bound["matrix_s"] / bound["bound_s"] and bound["ratio_cpu"] > 0
+    assert "x the bound; by CPU time" in table
 
 
 def test_points_methods_are_timed_on_points() -> None:

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from baselines.sad import SAD, patch_normalise, sad_matrix, sad_matrix_cdist
+from baselines.sad import (
+    SAD,
+    absdiff_rate,
+    pack_database,
+    patch_normalise,
+    sad_matrix,
+    sad_matrix_cdist,
+)
 from safl_bench.check import check_method, sample_views
 from safl_bench.errors import ConfigError, DataError
 
@@ -68,6 +75,19 @@ def test_fast_distance_is_bitwise_the_plain_sum_and_cdist(nq, ndb, dim):
     if nq and ndb:
         cdist = torch.cdist(torch.from_numpy(q), torch.from_numpy(db), p=1).numpy() / np.float32(dim)
         assert np.array_equal(fast, cdist)
+
+
+def test_database_panels_hold_each_tile_transposed_and_zero_padded():
+    db = np.arange(130 * 3, dtype=np.float32).reshape(130, 3)
+    panels = pack_database(db)
+    assert panels.shape == (2, 3, 128) and panels.flags.c_contiguous
+    assert np.array_equal(panels[0], db[:128].T)
+    assert np.array_equal(panels[1, :, :2], db[128:].T) and not panels[1, :, 2:].any()
+
+
+def test_vector_rate_probe_reports_wall_and_cpu_rates():
+    rate = absdiff_rate(seconds=0.03, dim=16)
+    assert rate["rate_per_s"] > 0 and rate["rate_per_cpu_s"] > 0
 
 
 def test_fast_distance_on_descriptors_matches_the_plain_sum():

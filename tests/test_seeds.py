@@ -86,6 +86,46 @@ def test_run_runs_every_declared_seed_once_and_reuses_them(seed_tasks, kitti_roo
     assert any("95 % interval over seeds and queries" in line for line in table)
 
 
+def test_seeds_share_the_cells_timing_and_database_and_records_stay_the_same(
+        seed_tasks, kitti_root, tmp_path, monkeypatch) -> None:
+    from safl_bench import evaluation
+
+    sizes: list[int] = []
+    plain = evaluation.describe
+
+    def counted(method, views):  # type: ignore[no-untyped-def]
+        sizes.append(len(views))
+        return plain(method, views)
+
+    monkeypatch.setattr(evaluation, "describe", counted)
+    sad = make_method("sad", size=16)
+    alone = runner.run_grid([sad], [NOISY], runner.RunOptions(
+        results_dir=tmp_path / "alone", kitti_root=str(kitti_root), progress=False,
+        timing_frames=2, timing_repeats=1, share_seeds=False))
+    described_alone, sizes[:] = len(sizes), []
+    shared = runner.run_grid([sad], [NOISY], _options(kitti_root, tmp_path / "shared"))
+    assert described_alone == 6 and len(sizes) == 4  # one database for the three seeds' queries
+    assert [o.seed for o in shared] == [0, 1, 2]
+    first = shared[0].record
+    assert first is not None and "measured at seed" not in first.timings.how_run
+    for a, b in zip(alone, shared, strict=True):
+        assert a.record is not None and b.record is not None
+        left, right = a.record.to_json(), b.record.to_json()
+        for varying in ("timings", "created", "environment"):
+            left.pop(varying), right.pop(varying)
+        assert left == right  # the same matches, outcomes and metrics
+        assert "measured at seed" not in a.record.timings.how_run  # alone: each seed timed
+        if b.seed > 0:
+            t = b.record.timings
+            assert t.how_run.endswith("the cell's timing (describe_ms_per_frame, peak_memory_mb), "
+                                      "measured at seed 0")
+            assert (t.describe_ms_per_frame, t.peak_memory_mb) == (
+                first.timings.describe_ms_per_frame, first.timings.peak_memory_mb)
+    # a later run of one more seed times it anew: what a run carries is its own measurement
+    more = runner.run_grid([sad], [NOISY], _options(kitti_root, tmp_path / "shared"), seeds=[3])
+    assert more[0].record is not None and "measured at seed" not in more[0].record.timings.how_run
+
+
 @pytest.mark.parametrize(("args", "message"), [
     (["--seeds", "0"], "a number of seeds is an integer >= 1, got 0"),
     (["--seeds", "two"], "a number of seeds is an integer >= 1, got 'two'"),

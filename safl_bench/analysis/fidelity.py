@@ -34,8 +34,12 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   descriptor's own nearest neighbour) of every top-view method on the revisit protocol, real
   (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v4`, the
   method's usual input on the default, the runner's choice), read from result records or run;
-  `ranking_tau` is Kendall's tau (scipy) between the methods' synthetic F1max and their mean
-  real F1max. A run picks a learned method's weights by the task's source (BiGAN and Stable-AFL
+  `ranking_tau` is Kendall's tau-b between the methods' orders on the synthetic task and on
+  the real ones, counting as a tie every pair whose order is not resolved beyond the noise
+  (`pair_orders`: the paired difference of their single-frame F1max, with its 95 % bootstrap
+  interval over the queries, `safl_bench.evaluation.uncertainty`; a revisit task has one seed; an order
+  is resolved only when the interval excludes 0), on either side; against the mean of the
+  real tasks a pair is resolved when every real task resolves it the same way. A run picks a learned method's weights by the task's source (BiGAN and Stable-AFL
   ship weights trained on the synthetic default and others trained on real KITTI 02), so with
   the committed records their ranks compare two trainings as well as two data sets, and on 02
   the real-KITTI weights see their own training sequence; `mixed_weights` names such methods
@@ -416,6 +420,15 @@ class MethodResult:
     note: str = ""
     #: the weights the record was made with ("file sha256[:12]"; "" for methods without weights)
     weights: str = ""
+    #: the single-frame per-query outcomes, one per seed (None: the record holds none), for the
+    #: paired differences of `pair_orders`; not part of the report's JSON
+    outcomes: list[Any] | None = field(default=None, repr=False, compare=False)
+
+    def to_json(self) -> dict[str, Any]:
+        """The report's view of the result (everything but the per-query outcomes)."""
+        return {"method": self.method, "task_id": self.task_id, "recall_at_1": self.recall_at_1,
+                "f1_max": self.f1_max, "status": self.status, "note": self.note,
+                "weights": self.weights}
 
 
 def weights_label(params: dict[str, Any]) -> str:
@@ -430,9 +443,12 @@ def weights_label(params: dict[str, Any]) -> str:
 
 def result_of(record: Any, status: str = "record") -> MethodResult:
     """A record's single-frame Recall@1 and F1max, with the weights it was made with."""
+    from safl_bench.results.records import seed_outcomes
+
     metrics = record.results["single_frame"].metrics
     return MethodResult(record.method.name, record.task.id, metrics.recall_at_1, metrics.f1_max, status,
-                        weights=weights_label(record.method.params))
+                        weights=weights_label(record.method.params),
+                        outcomes=seed_outcomes([record], "single_frame"))
 
 
 def mixed_weights(results: dict[str, dict[str, MethodResult]]) -> dict[str, dict[str, str]]:
@@ -447,36 +463,83 @@ def mixed_weights(results: dict[str, dict[str, MethodResult]]) -> dict[str, dict
     return out
 
 
-def _kendall(x: Sequence[float], y: Sequence[float]) -> float | None:
-    from scipy.stats import kendalltau
+@dataclass(frozen=True)
+class PairOrder:
+    """Two methods on one task: `first` minus `second` in single-frame F1max, with its 95 %
+    interval (None: no per-query outcomes to pair, or not scored on the same queries), and the
+    order that survives the noise: 1 (first better), -1 (second better) or 0 (tied)."""
 
-    if len(x) < 2:
+    first: str
+    second: str
+    task_id: str
+    difference: Any  # uncertainty.Interval | None
+    order: int
+
+    @property
+    def verdict(self) -> str:
+        if self.order == 0:
+            return "tied"
+        better, worse = (self.first, self.second) if self.order > 0 else (self.second, self.first)
+        return f"{better} > {worse} resolved"
+
+
+def pair_orders(results: dict[str, dict[str, MethodResult]], task: str) -> list[PairOrder]:
+    """Every pair of the methods with a value on `task` (names sorted, first < second), ordered
+    only when the paired difference's 95 % interval excludes 0 (module docstring)."""
+    from safl_bench.evaluation.uncertainty import sample
+
+    have = sorted(m for m in results if (r := results[m].get(task)) is not None
+                  and r.f1_max is not None)
+    samples = {}
+    for m in have:
+        outcomes = results[m][task].outcomes
+        samples[m] = None if not outcomes else sample(outcomes)
+    out = []
+    for i, a in enumerate(have):
+        for b in have[i + 1:]:
+            sa, sb = samples[a], samples[b]
+            diff = None
+            if sa is not None and sb is not None:
+                try:
+                    diff = sa.minus(sb)["f1_max"]
+                except DataError:  # other queries (or seeds) on the two sides: nothing to pair
+                    diff = None
+            order = 0
+            if diff is not None and diff.excludes_zero():
+                order = 1 if diff.mean > 0 else -1
+            out.append(PairOrder(a, b, task, diff, order))
+    return out
+
+
+def _tau_b(x: Sequence[int], y: Sequence[int]) -> float | None:
+    """Kendall's tau-b of two sets of pair orders (+1, -1, 0 = tied) over the same pairs:
+    (concordant - discordant) / sqrt(pairs untied in x * pairs untied in y); None when either
+    side ties every pair (the order is then undefined)."""
+    nx = sum(1 for v in x if v)
+    ny = sum(1 for v in y if v)
+    if nx == 0 or ny == 0:
         return None
-    tau = kendalltau(list(x), list(y)).statistic
-    return None if tau is None or not math.isfinite(float(tau)) else float(tau)
+    return float(sum(a * b for a, b in zip(x, y, strict=True)) / math.sqrt(nx * ny))
 
 
 def ranking_tau(results: dict[str, dict[str, MethodResult]], synthetic: str,
                 real: Sequence[str]) -> dict[str, float | None]:
-    """Kendall's tau of the methods' F1max: synthetic against each real task and against the mean
-    over the real tasks ("mean"), over the methods with a value on every task involved."""
+    """Kendall's tau-b of the methods' orders beyond the noise (`pair_orders`), synthetic
+    against each real task and against the real tasks together ("mean": a pair is ordered when
+    every real task orders it the same way, else tied), over the methods with a value on every
+    task involved."""
     out: dict[str, float | None] = {}
-    methods = sorted(results)
-
-    def f1(m: str, t: str) -> float | None:
-        r = results[m].get(t)
-        return None if r is None else r.f1_max
-
+    orders = {t: {(p.first, p.second): p.order for p in pair_orders(results, t)}
+              for t in [synthetic, *real]}
     for task in [*real, "mean"]:
-        xs, ys = [], []
-        for m in methods:
-            s = f1(m, synthetic)
-            vals = [f1(m, t) for t in (real if task == "mean" else [task])]
-            if s is None or any(v is None for v in vals):
-                continue
-            xs.append(s)
-            ys.append(float(np.mean([v for v in vals if v is not None])))
-        out[task] = _kendall(xs, ys)
+        involved = [synthetic, *(real if task == "mean" else [task])]
+        pairs = sorted(set.intersection(*(set(orders[t]) for t in involved)))
+        xs = [orders[synthetic][p] for p in pairs]
+        ys = []
+        for p in pairs:
+            seen = {orders[t][p] for t in involved[1:]}
+            ys.append(seen.pop() if len(seen) == 1 else 0)
+        out[task] = _tau_b(xs, ys) if pairs else None
     return out
 
 

@@ -11,11 +11,19 @@ timed on the views resampled to that size (timing does not depend on the content
 says so (`views`). Slow methods are timed batched on a prefix of the views of about
 `batched_budget_s` seconds' work (estimated from the batch-1 figure), at least one batch.
 
+A method may name a former distance (class attribute `bench_reference_distance`, a (name,
+function) pair; SAD: torch.cdist(p=1)), timed on the same matrix with the speed-up and whether
+the results are bitwise equal, and a bound (`bench_distance_bound(nq, ndb, dim)`, returning
+`bound_s` with how it was reached; SAD: its absolute differences at the CPU's vector rate
+measured in the same run), printed with the matrix time's ratio to it.
+
     safl-bench bench methods --method stable_afl --method scan_context
 """
 
 from __future__ import annotations
 
+import statistics
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -88,6 +96,9 @@ def bench_method(
         reference = getattr(type(method), "bench_reference_distance", None)
         if reference is not None:
             out["matrix"]["reference"] = _reference_matrix(method, reference, big, mat.median_s)
+        bound = getattr(type(method), "bench_distance_bound", None)
+        if bound is not None:
+            out["matrix"]["bound"] = _bound_rounds(method, bound, big, rounds=max(1, min(3, repeats)))
     return out
 
 
@@ -102,6 +113,23 @@ def _reference_matrix(method: Method, reference: Any, big: np.ndarray, own_s: fl
     return {"name": name, "median_s": ref_timing.median_s, "speedup": ref_timing.median_s / own_s,
             "bitwise_equal": bool(np.array_equal(own, ref)),
             "max_abs_diff": float(np.abs(own.astype(np.float64) - ref).max()) if own.size else 0.0}
+
+
+def _bound_rounds(method: Method, bound: Any, big: np.ndarray, rounds: int) -> dict[str, Any]:
+    """The matrix against its bound in `rounds` rounds, each the bound's rate measured just
+    before the matrix is timed (wall and CPU time), so other work on a shared machine slows
+    both alike; the medians of the per-round figures and ratios."""
+    per_round = []
+    for _ in range(rounds):
+        figures = bound(len(big), len(big), big.shape[1])
+        t0, c0 = time.perf_counter(), time.process_time()
+        method.distance(big, big)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        per_round.append({**figures, "matrix_s": wall, "matrix_cpu_s": cpu,
+                          "ratio": wall / figures["bound_s"], "ratio_cpu": cpu / figures["bound_cpu_s"]})
+    out: dict[str, Any] = {k: statistics.median(r[k] for r in per_round) for k in per_round[0]}
+    out["rounds"] = rounds
+    return out
 
 
 def run(
@@ -143,6 +171,14 @@ def format_results(results: Sequence[dict[str, Any]]) -> str:
                          f"with {ref['name']} in the same run, {ref['speedup']:.1f}x; "
                          + ("bitwise equal" if ref["bitwise_equal"] else f"max abs diff {ref['max_abs_diff']:.1e}")
                          + ")")
+        bound = (r.get("matrix") or {}).get("bound")
+        if bound:
+            lines.append(f"({r['method']}: matrix {bound['matrix_s']:.2f} s against the bound "
+                         f"{bound['bound_s']:.2f} s, {bound['absdiffs'] / 1e9:.1f} G absolute differences at "
+                         f"{bound['rate_per_s'] / 1e9:.1f} G/s, this CPU's vector rate measured just before: "
+                         f"{bound['ratio']:.2f}x the bound; by CPU time {bound['matrix_cpu_s']:.2f} s against "
+                         f"{bound['bound_cpu_s']:.2f} s, {bound['ratio_cpu']:.2f}x; medians of "
+                         f"{bound['rounds']} rounds)")
     for r in results:
         if r.get("views"):
             lines.append(f"({r['method']}: {r['views']}; batched: {r['batched']['n_items']} frames)")

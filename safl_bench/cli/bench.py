@@ -10,6 +10,8 @@
                                                  cached
   safl-bench bench bevplace [--reference DIR]    BEVPlace against its authors' code (run side by
                                                  side) and against the compute bound, both ratios
+  safl-bench bench seeds --bev-root DIR          five seeds of a cell against one (stable_afl,
+                                                 bigan on real 00), interval overhead
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -18,6 +20,7 @@ The map-building and synthetic-LiDAR figures are pytest-benchmark files run from
 from __future__ import annotations
 
 import argparse
+import os
 
 from safl_bench.errors import ConfigError
 
@@ -26,9 +29,10 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
-    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v4)")
+    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v4; "
+                        "seeds: the cell run, default SAFL/BEVKITTI00-T1R1-v0)")
     parser.add_argument("--frames", type=int, default=None,
                         help="frames per timed batch-1 run (default 50; bevplace: 8)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
@@ -43,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--kitti-root", metavar="DIR", default=None,
                         help="parallel: KITTI odometry root (default: the synthetic default)")
     parser.add_argument("--bev-root", metavar="DIR", default=None,
-                        help="images: the top-view image folders (BEVPlace's layout); --sequence picks one")
+                        help="images, seeds: the top-view image folders (BEVPlace's layout); --sequence picks one")
     parser.add_argument("--reference", metavar="DIR", default=None,
                         help="bevplace: the authors' code (the folder holding network/, e.g. "
                              "../shared/bevplace/reference-52f31362), timed side by side")
@@ -83,6 +87,8 @@ def main(args: argparse.Namespace) -> int:
         return 0
     if args.what == "bevplace":
         return _bevplace(args)
+    if args.what == "seeds":
+        return _seeds(args)
     if args.what == "matcher":
         from safl_bench.bench import matching_bench
 
@@ -133,6 +139,22 @@ def _bevplace(args: argparse.Namespace) -> int:
                                 batch_size=args.batch_size, rounds=args.repeats, plain=args.plain)
     result["views"] = note
     print(bevplace_bench.format_results(result, note))
+    if args.json:
+        atomic_write_json(args.json, result)
+    return 0
+
+
+def _seeds(args: argparse.Namespace) -> int:
+    from safl_bench.bench import seeds_bench
+    from safl_bench.common.atomic import atomic_write_json
+
+    bev_root = args.bev_root or os.environ.get("SAFL_BEV_ROOT")
+    if bev_root is None:
+        raise ConfigError("bench seeds needs --bev-root DIR (top-view image folders, e.g. "
+                          "../shared/kitti-topviews) or $SAFL_BEV_ROOT")
+    result = seeds_bench.run(bev_root, args.method, task_id=args.task or seeds_bench.DEFAULT_TASK,
+                             repeats=args.repeats)
+    print(seeds_bench.format_results(result))
     if args.json:
         atomic_write_json(args.json, result)
     return 0

@@ -152,6 +152,33 @@ def _plot_ranking(ax: Any, pr: dict[str, Any], tasks: list[str]) -> None:
     ax.set(title="single-frame F1max, revisit protocol", ylim=(0, 1))
 
 
+def _order_text(order: Any) -> str:
+    """'-0.044 [-0.127, 0.023] tied' (or '... stable_afl > bigan'); 'n/a tied' without outcomes."""
+    iv = order.difference
+    shown = "n/a (no per-query outcomes)" if iv is None else iv.format(1.0, 3)
+    return f"{shown} {'tied' if order.order == 0 else order.verdict.removesuffix(' resolved')}"
+
+
+def _order_rows(orders: dict[str, list[Any]], tasks: list[str]) -> list[list[str]]:
+    """A row per pair of methods, a column per task: the difference, its interval, the verdict."""
+    pairs = sorted({(o.first, o.second) for per in orders.values() for o in per})
+    rows = [["pair (first - second)", *[t.split("/")[-1] for t in tasks]]]
+    for a, b in pairs:
+        cells = []
+        for t in tasks:
+            found = [o for o in orders.get(t, []) if (o.first, o.second) == (a, b)]
+            cells.append(_order_text(found[0]) if found else "n/a")
+        rows.append([f"{a} - {b}", *cells])
+    return rows
+
+
+def _order_json(order: Any) -> dict[str, Any]:
+    iv = order.difference
+    return {"first": order.first, "second": order.second, "order": order.order,
+            "verdict": order.verdict,
+            "difference": None if iv is None else {"mean": iv.mean, "low": iv.low, "high": iv.high}}
+
+
 def main(args: argparse.Namespace) -> int:
     from safl_bench.analysis import fidelity as F
     from safl_bench.common.fingerprint import to_jsonable
@@ -295,8 +322,17 @@ def main(args: argparse.Namespace) -> int:
               + "): its rank compares trainings as well as data; for the data alone, run it on the "
               f"real tasks with the synthetic weights (`safl-bench run --method {m} --weights FILE "
               "--results DIR ...`) and give --results DIR here")
-    print("Kendall tau of F1max, synthetic vs " + ", ".join(
+    orders = {t: F.pair_orders(pr, t) for t in tasks} if pr else {}
+    if any(orders.values()):
+        print("paired differences of single-frame F1max (first - second, 95 % interval over the "
+              "queries, block bootstrap); an order counts only when its interval excludes 0, "
+              "else the pair is tied:")
+        print(_table(_order_rows(orders, tasks)))
+    print("Kendall tau-b of the orders beyond the noise (ties counted), synthetic vs " + ", ".join(
         f"{t.split('/')[-1] if t != 'mean' else 'the real mean'} {_fmt(v)}" for t, v in taus.items()))
+    if any(orders.values()) and any(v is None for v in taus.values()):
+        print("  (n/a: on one side every pair of the methods both sides have is tied, so there is "
+              "no order to correlate)")
     print("goals: " + "; ".join(
         f"{g.name} {_fmt(g.value, pct=g.name == 'nonzero_fraction')} (goal {g.target}): {'met' if g.met else 'NOT met'}"
         for g in targets))
@@ -318,7 +354,8 @@ def main(args: argparse.Namespace) -> int:
             "ranking_tau": taus.get("mean"),
             "goals": {g.name: {"value": g.value, "target": g.target, "met": g.met} for g in targets},
             "ranking_tau_per_sequence": {t: v for t, v in taus.items() if t != "mean"},
-            "place_recognition": {m: {t: to_jsonable(r) for t, r in per.items()} for m, per in pr.items()},
+            "place_recognition": {m: {t: r.to_json() for t, r in per.items()} for m, per in pr.items()},
+            "pair_orders": {t: [_order_json(o) for o in per] for t, per in orders.items()},
             "sequences": {m.label: to_jsonable(m) for m in measured},
             "synthetic": {"seed": args.seed, "sequence": args.synth_sequence, "root": str(synth.root),
                           "map_config": to_jsonable(config)},

@@ -22,7 +22,8 @@ from matplotlib.figure import Figure
 
 from safl_bench.common.atomic import atomic_write_with
 from safl_bench.errors import ConfigError
-from safl_bench.leaderboard.grouping import TableKey, condition_order
+from safl_bench.leaderboard.grouping import Cell, TableKey, condition_order, format_seeds
+from safl_bench.leaderboard.intervals import BEST
 from safl_bench.leaderboard.tables import MISSING, MODE_LABELS, Table
 from safl_bench.leaderboard.training_logs import TrainingLog
 from safl_bench.results.records import MODES, ResultRecord
@@ -60,13 +61,26 @@ def _condition_style(name: str, index: int) -> dict[str, str]:
     return {"color": _FALLBACK_COLORS[index % len(_FALLBACK_COLORS)], "linestyle": "-."}
 
 
+def heatmap_text(cell: Cell | None) -> str:
+    """A heat-map cell's label: the mean over its seeds and, below it, its 95 % interval (the
+    table's own numbers, `intervals.cell_sample`), e.g. '0.91\\n[0.88, 0.94]'; '—' missing."""
+    if cell is None or cell.mean is None:
+        return MISSING
+    text = f"{cell.mean:.2f}"
+    if cell.low is not None and cell.high is not None:
+        text += f"\n[{cell.low:.2f}, {cell.high:.2f}]"
+    return text
+
+
 def auc_heatmap(table: Table, path: Path) -> None:
-    """The AUC table as a heat map, one panel per matching mode (the paper's Figure 13)."""
+    """The AUC table as a heat map, one panel per matching mode (the paper's Figure 13). Each
+    cell shows its mean and 95 % interval (`heatmap_text`); the best beyond the noise of a
+    column (the table's bold) is in bold."""
     modes = [MODE_LABELS[m] for m in MODES if any(r[2] == MODE_LABELS[m] for r in table.rows)]
     n_rows = max((sum(1 for r in table.rows if r[2] == mode) for mode in modes), default=1)
     n_cols = max(len(table.columns), 1)
-    width = 1.2 + 0.75 * n_cols
-    height = 1.0 + 0.45 * n_rows
+    width = 1.2 + 0.95 * n_cols
+    height = 1.0 + 0.62 * n_rows
     with matplotlib.style.context("default"):
         fig = _new_figure(width, height * len(modes) + 0.6)
         axes = fig.subplots(len(modes), 1, squeeze=False)[:, 0]
@@ -83,12 +97,13 @@ def auc_heatmap(table: Table, path: Path) -> None:
             image = ax.imshow(
                 np.ma.masked_invalid(values), cmap=cmap, vmin=0.5, vmax=1.0, aspect="auto"
             )
-            for a in range(len(rows)):
+            for a, i in enumerate(rows):
                 for j in range(len(table.columns)):
                     v = values[a, j]
-                    text = MISSING if np.isnan(v) else f"{v:.2f}"
                     color = "black" if np.isnan(v) or v > 0.8 else "white"
-                    ax.text(j, a, text, ha="center", va="center", fontsize=8, color=color)
+                    ax.text(j, a, heatmap_text(table.cells[i][j]), ha="center", va="center",
+                            fontsize=7, color=color, linespacing=1.1,
+                            fontweight="bold" if table.marks.get((i, j)) == BEST else "normal")
             ax.set_xticks(range(len(table.columns)), table.columns, fontsize=8)
             ax.set_yticks(
                 range(len(rows)),
@@ -113,6 +128,7 @@ def pr_figure(
     modes = [m for m in MODES if m in by_mode]
     conditions = sorted({r.task.condition or "" for r in records})
     order = condition_order(conditions)
+    n_seeds = len({r.seed for r in records})
     with matplotlib.style.context("default"):
         fig = _new_figure(5.0 * len(modes), 4.6)
         axes = fig.subplots(1, len(modes), squeeze=False)[0]
@@ -127,14 +143,15 @@ def pr_figure(
                 ax.plot(
                     pr.recall,
                     pr.precision,
-                    linewidth=1.2,
                     label=None if name in labelled else name,
                     **style,
+                    **_seed_line(n_seeds),
                 )
                 labelled.add(name)
             _pr_axes(ax, f"{MODE_LABELS[mode]} matching")
             ax.legend(fontsize=7, ncols=2, loc="lower left")
-        fig.suptitle(f"PR curves of {method} v{version} — {key.caption}", fontsize=9)
+        fig.suptitle(f"PR curves of {method} v{version} — {key.caption}{_seeds_caption(records)}",
+                     fontsize=9)
         save_png(fig, path)
 
 
@@ -147,6 +164,7 @@ def revisit_pr_figure(key: TableKey, records: Sequence[ResultRecord], path: Path
         axes = fig.subplots(len(modes), len(sequences), squeeze=False)
         methods = sorted({(r.method.name, r.method.version) for r in records})
         colors = matplotlib.colormaps["tab10"]
+        n_seeds = len({r.seed for r in records})
         for a, mode in enumerate(modes):
             for b, sequence in enumerate(sequences):
                 ax = axes[a][b]
@@ -162,15 +180,28 @@ def revisit_pr_figure(key: TableKey, records: Sequence[ResultRecord], path: Path
                         pr.recall,
                         pr.precision,
                         color=colors(methods.index(who) % 10),
-                        linewidth=1.2,
                         label=None if who in labelled else f"{who[0]} v{who[1]}",
+                        **_seed_line(n_seeds),
                     )
                     labelled.add(who)
                 _pr_axes(ax, f"sequence {sequence}, {MODE_LABELS[mode]} matching")
                 if labelled:
                     ax.legend(fontsize=7, loc="lower left")
-        fig.suptitle(f"Revisit protocol PR curves — {key.caption}", fontsize=9)
+        fig.suptitle(f"Revisit protocol PR curves — {key.caption}{_seeds_caption(records)}",
+                     fontsize=9)
         save_png(fig, path)
+
+
+def _seed_line(n_seeds: int) -> dict[str, float]:
+    """Line style of one record's PR curve: with several seeds every seed is drawn, thin and
+    translucent, so where the curves of one condition fan out is the spread over the seeds."""
+    return {"linewidth": 1.2} if n_seeds <= 1 else {"linewidth": 0.7, "alpha": 0.6}
+
+
+def _seeds_caption(records: Sequence[ResultRecord]) -> str:
+    """'' for one seed, else ' (one curve per seed: seeds 0-4)'."""
+    seeds = {r.seed for r in records}
+    return "" if len(seeds) <= 1 else f"\n(one curve per seed: seeds {format_seeds(frozenset(seeds))})"
 
 
 def _pr_axes(ax: Axes, title: str) -> None:

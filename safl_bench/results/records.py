@@ -286,7 +286,10 @@ class Timings:
     describe_ms_per_frame: median over `repeats` of describing one map at a time (batch 1);
     describe_frames_per_s: throughput when describing in batches; matcher_s: the shared
     matcher's time for the whole task; peak_memory_mb: peak resident memory (None if unknown);
-    how_run: e.g. "sequential, pinned" (cells run one at a time) or "parallel, 4 workers".
+    how_run: e.g. "sequential, pinned" (cells run one at a time) or "parallel, 4 workers". The
+    batch-1 figures (describe_ms_per_frame, peak_memory_mb) are the (method, task) cell's: a run
+    takes them once, at the first seed it computes, and the records of its other seeds carry
+    them, their how_run ending "the cell's timing (...), measured at seed S" (`safl_bench.run.runner`).
     """
 
     __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG

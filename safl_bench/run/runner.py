@@ -10,6 +10,17 @@ so an interrupted run resumes where it stopped.
 The seed of a cell is the seed of the queries' viewpoint noise (the registered task's seed unless
 `--seed` gives another); the record keeps the registered task's fingerprint so records of several
 seeds of one task sit in one leaderboard cell.
+
+The seeds of a cell share what does not depend on the seed (`RunOptions.share_seeds`, on by
+default): within one run the batch-1 timing (`Timings.describe_ms_per_frame`, `peak_memory_mb`)
+is taken once per (method, task), at the first seed the run computes, and the other seeds'
+records carry it, saying so in `how_run` ("the cell's timing, measured at seed S"); the database
+descriptors are described once per method and database (the clean database views of a cell's
+seeds, and of the paper conditions of one sequence, are the same frames), the seconds they took
+carried into each record's throughput. Everything else of a record (matches, outcomes, metrics)
+is what it would be alone: methods describe each view independently of the others
+(`check_method`). `share_seeds=False` describes and times every seed on its own (what
+`safl-bench bench seeds` compares against).
 """
 
 from __future__ import annotations
@@ -25,7 +36,7 @@ import numpy as np
 
 from safl_bench.common.parallel import JobResult, Parallel, run_jobs
 from safl_bench.errors import ConfigError, SaflError
-from safl_bench.evaluation.cell import evaluate_method
+from safl_bench.evaluation.cell import DatabaseMemo, evaluate_method
 from safl_bench.evaluation.metrics import METRICS_VERSION, NoPositivesError
 from safl_bench.matching.settings import MODES, EvaluationConfig, same_settings
 from safl_bench.methods.method import Method, input_note, method_input
@@ -70,6 +81,7 @@ class RunOptions:
     timing_frames: int = 20
     timing_repeats: int = 5
     progress: bool = True
+    share_seeds: bool = True  # time a cell once and describe its database once (`run_grid`)
 
 
 @dataclass
@@ -83,6 +95,7 @@ class CellOutcome:
     record: ResultRecord | None = None
     message: str = ""
     method: str = ""  # the method's name
+    timed_here: bool = False  # its batch-1 timing was measured for this record (`finish_cell`)
 
 
 def resolve_tasks(items: Sequence[str], *, source: str = "synth") -> list[str]:
@@ -198,14 +211,14 @@ def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunO
 
 
 def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOptions,
-              where: str) -> EvaluatedCell:
+              where: str, memo: DatabaseMemo | None = None) -> EvaluatedCell:
     kind = method.input_kind
     task.prepare([kind])
     queries, database = task.queries(kind), task.database(kind)
     try:
         evaluation = evaluate_method(
             method, method_input(method, queries), method_input(method, database), task.truth,
-            config=options.evaluation, revisit=task.spec.protocol == "revisit",
+            config=options.evaluation, revisit=task.spec.protocol == "revisit", memo=memo,
         )
     except NoPositivesError as exc:
         raise NoPositivesError(f"task {registered.id} (seed {task.spec.seed}): {exc}; its "
@@ -236,17 +249,25 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
 
 
 def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
-                task: Task | None = None) -> CellOutcome:
+                task: Task | None = None, timed: tuple[int, Timings] | None = None) -> CellOutcome:
     """Time the method at batch 1 on the cell's queries (in this process, pinned to fixed CPUs,
     nothing else of the run competing for them), write the record atomically and drop the
     cell's evaluated file if a parallel run left one. `task`: the cell's task if this process
-    already has it (its views are loaded), else it is opened again.
+    already has it (its views are loaded), else it is opened again. `timed`: (seed, timings) of
+    the same (method, task) cell timed at another seed in this run: its batch-1 figures are the
+    cell's and are carried, not measured again (module docstring).
 
     A record of the same run that only an older metrics version made keeps its timings (the
     measures changed, not the method: `how_run` says which run timed it), unless `force`."""
     carried = None if options.force else _carried_timings(options, cell)
     if carried is not None:
         return _write(options, cell, carried)
+    if timed is not None:
+        at, first = timed
+        return _write(options, cell, dataclasses.replace(
+            first, describe_frames_per_s=cell.describe_frames_per_s, matcher_s=cell.matcher_s,
+            how_run=f"{first.how_run}; the cell's timing (describe_ms_per_frame, "
+                    f"peak_memory_mb), measured at seed {at}"))
     if task is None:
         task = _task(spec(cell.task.id), cell.seed, options, progress=False, method=method)
     queries = method_input(method, task.queries(method.input_kind))
@@ -270,7 +291,7 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
         repeats=options.timing_repeats,
         how_run=how_run,
     )
-    return _write(options, cell, timings)
+    return dataclasses.replace(_write(options, cell, timings), timed_here=True)
 
 
 def _carried_timings(options: RunOptions, cell: EvaluatedCell) -> Timings | None:
@@ -401,6 +422,18 @@ def run_grid(
     outcomes: dict[int, CellOutcome] = {}
     evaluated: dict[int, EvaluatedCell] = {}
     todo: dict[int, int] = {}  # cell -> seed
+    memo: DatabaseMemo | None = {} if options.share_seeds else None
+    timed: dict[tuple[int, str], tuple[int, Timings]] = {}  # (method, task) -> its first timing
+
+    def finish(i: int, cell: EvaluatedCell, task: Task | None = None) -> CellOutcome:
+        """`finish_cell`, timing each (method, task) once in this run (`share_seeds`)."""
+        method, task_id, opts = cells[i]
+        key = (id(method), task_id)
+        outcome = finish_cell(method, opts, cell, task, timed.get(key) if memo is not None else None)
+        if outcome.timed_here and outcome.record is not None:
+            timed.setdefault(key, (outcome.seed, outcome.record.timings))
+        return outcome
+
     for i, (method, task_id, opts) in enumerate(cells):
         try:
             seed, existing = _existing(method, task_id, opts, say)
@@ -426,11 +459,11 @@ def run_grid(
             bar.set_postfix_str(task_id)
             try:
                 if i in evaluated:
-                    outcomes[i] = finish_cell(method, opts, evaluated[i])
+                    outcomes[i] = finish(i, evaluated[i])
                 else:  # popped: its views leave memory with the cell
                     task = tasks.pop(i)
-                    cell = _evaluate(method, spec(task_id), task, opts, "this process")
-                    outcomes[i] = finish_cell(method, opts, cell, task)
+                    cell = _evaluate(method, spec(task_id), task, opts, "this process", memo)
+                    outcomes[i] = finish(i, cell, task)
             except SaflError as exc:
                 outcomes[i] = failed(i, str(exc))
         return [outcomes[i] for i in range(len(cells))]
@@ -455,9 +488,8 @@ def run_grid(
         if result.error is not None:
             outcomes[i] = failed(i, result.error)
     for i in sorted(evaluated):
-        method, _, opts = cells[i]
         try:
-            outcomes[i] = finish_cell(method, opts, evaluated[i])
+            outcomes[i] = finish(i, evaluated[i])
         except SaflError as exc:
             outcomes[i] = failed(i, str(exc))
     return [outcomes[i] for i in range(len(cells))]
