@@ -42,6 +42,19 @@ def test_the_old_modules_that_are_now_packages_keep_their_names() -> None:
         _ = importlib.import_module("safl_bench.matching").no_such_name
 
 
+def test_monkeypatching_an_old_module_that_is_now_a_package_patches_its_module(monkeypatch) -> None:
+    from safl_bench import evaluation, matching
+    from safl_bench.evaluation import cell
+    from safl_bench.matching import matcher
+
+    monkeypatch.setattr(evaluation, "describe", "patched")
+    monkeypatch.setattr(matching, "match", "patched too")
+    assert (cell.describe, matcher.match) == ("patched", "patched too")
+    monkeypatch.undo()
+    assert callable(cell.describe) and callable(matcher.match)
+    assert "describe" not in vars(evaluation)  # nothing left behind on the package
+
+
 def test_import_safl_bench_loads_no_stage_it_does_not_need() -> None:
     code = ("import sys, safl_bench; print(sorted(m for m in sys.modules if m.startswith("
             "('safl_bench.methods', 'safl_bench.matching', 'safl_bench.evaluation', "

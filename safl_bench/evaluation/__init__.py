@@ -6,23 +6,12 @@ their curves), `uncertainty` (intervals over seeds and queries, paired differenc
 metrics).
 
 ``safl_bench.evaluation`` was the one-cell module before the stages had folders: its names
-(``from safl_bench.evaluation import evaluate``) still resolve here, lazily, to `cell`'s.
+(``from safl_bench.evaluation import evaluate``) are still read and written through this package: they are `cell`'s
+(`safl_bench.common.oldmodule`, so that monkeypatching either path patches the same function).
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from safl_bench.common.oldmodule import stand_for
 
-#: This package's modules: never looked up in `cell` (importing them goes on as usual).
-_MODULES = ('cell', 'groundtruth', 'metrics', 'uncertainty')
-
-
-def __getattr__(name: str) -> Any:
-    if name.startswith("__") or name in _MODULES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    module = importlib.import_module(f"{__name__}.cell")
-    try:
-        return getattr(module, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+stand_for(__name__, f"{__name__}.cell", ("cell", "groundtruth", "metrics", "uncertainty"))

@@ -5,23 +5,12 @@ settings of an evaluation, `EvaluationConfig`), `presets` (named sets of those s
 `loop` (the plain-loop reference implementation the vectorised matcher is tested against).
 
 ``safl_bench.matching`` was the matcher module before the stages had folders: its names
-(``from safl_bench.matching import match``) still resolve here, lazily, to `matcher`'s.
+(``from safl_bench.matching import match``) are still read and written through this package: they are `matcher`'s
+(`safl_bench.common.oldmodule`, so that monkeypatching either path patches the same function).
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from safl_bench.common.oldmodule import stand_for
 
-#: This package's modules: never looked up in `matcher` (importing them goes on as usual).
-_MODULES = ('matcher', 'settings', 'presets', 'loop', 'confidence')
-
-
-def __getattr__(name: str) -> Any:
-    if name.startswith("__") or name in _MODULES:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    module = importlib.import_module(f"{__name__}.matcher")
-    try:
-        return getattr(module, name)
-    except AttributeError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+stand_for(__name__, f"{__name__}.matcher", ("matcher", "settings", "presets", "loop", "confidence"))
