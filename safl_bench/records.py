@@ -123,6 +123,9 @@ class Metrics:
     extended_precision_of_correct: float | None = None
     n_scored: int | None = None
     n_correct: int | None = None
+    #: the authors' reading (recall over correct matches at the first precision >= 0.99;
+    #: metrics version 3), named apart from ours: `safl_bench.metrics`
+    authors_recall_at_99p: float | None = None
 
 
 @dataclass(frozen=True)
@@ -314,6 +317,7 @@ def mode_result_from_evaluation(evaluation: Evaluation,
             extended_precision_of_correct=float(evaluation.extended_precision_of_correct),
             n_scored=int(evaluation.n_scored),
             n_correct=int(evaluation.n_correct),
+            authors_recall_at_99p=float(evaluation.authors_recall_at_99p),
         ),
         precision=evaluation.precision,
         recall=evaluation.recall,
@@ -776,7 +780,7 @@ def _parse_mode(r: _Reader, data: Any, where: str) -> ModeResult:
         recall_at_n=r.rates(m.get("recall_at_n"), f"{mw}.recall_at_n"),
         **{key: r.rate(m.get(key), f"{mw}.{key}") for key in (
             "recall_at_100_precision_of_correct", "f1_max_of_correct",
-            "extended_precision_of_correct")},
+            "extended_precision_of_correct", "authors_recall_at_99p")},
         n_scored=r.opt_int(m.get("n_scored"), f"{mw}.n_scored"),
         n_correct=r.opt_int(m.get("n_correct"), f"{mw}.n_correct"),
     )

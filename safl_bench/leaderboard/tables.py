@@ -595,6 +595,7 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                         m.recall_at_100_precision_of_correct, 4),
                     "f1_max_of_correct": _num(m.f1_max_of_correct, 4),
                     "extended_precision_of_correct": _num(m.extended_precision_of_correct, 4),
+                    "authors_recall_at_99p": _num(m.authors_recall_at_99p, 4),
                     "n_queries": m.n_queries,
                     "n_scored": UNDEFINED if m.n_scored is None else m.n_scored,
                     "n_positives": m.n_positives,
