@@ -229,6 +229,9 @@ class ResultRecord:
     schema: int = SCHEMA_VERSION
     #: the version of `safl_bench.metrics` that scored it (a file without one is version 1)
     metrics_version: int = METRICS_VERSION
+    #: one line when the method's weights were trained on this task's sequence (None: not, or
+    #: unknown); `safl_bench.training_data`
+    seen_in_training: str | None = None
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -419,10 +422,13 @@ def new_record(
     environment: Environment | None = None,
 ) -> ResultRecord:
     """A record stamped now (UTC), with this process's environment unless one is given, scored
-    with this code's metrics version.
+    with this code's metrics version, marked when the method's weights were trained on the
+    task's sequence (`safl_bench.training_data.seen_note`).
 
     `matcher` may be a dict or a dataclass such as `MatcherConfig` (stored as JSON).
     """
+    from safl_bench.training_data import seen_note
+
     matcher_json = to_jsonable(matcher)
     if not isinstance(matcher_json, dict):
         raise ConfigError(f"matcher settings must be a mapping or dataclass, got {matcher!r}")
@@ -436,6 +442,8 @@ def new_record(
         environment=environment if environment is not None else collect_environment(),
         created=utc_now(),
         metrics_version=METRICS_VERSION,
+        seen_in_training=seen_note(method.params, task.source_kind, task.source_label,
+                                   task.sequence),
     )
 
 
@@ -882,6 +890,7 @@ def _parse_record(r: _Reader, data: Any) -> ResultRecord:
         created=created,
         schema=schema,
         metrics_version=_metrics_version(r, d, ""),
+        seen_in_training=r.opt_str(d.get("seen_in_training"), "seen_in_training"),
     )
 
 

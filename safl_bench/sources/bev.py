@@ -113,9 +113,9 @@ def open_bev_sequence(root: Path, name: str) -> BevSequence:
     pose_file = "pose.txt"
     kitti, calib = folder / KITTI_POSES, folder / KITTI_CALIB
     if kitti.is_file() != calib.is_file():
-        have, lacks = (kitti, calib) if kitti.is_file() else (calib, kitti)
-        raise DataError(f"{have}: KITTI's poses need both {KITTI_POSES} and {KITTI_CALIB}; "
-                        f"{lacks} is missing")
+        present, absent = (kitti, calib) if kitti.is_file() else (calib, kitti)
+        raise DataError(f"{present}: KITTI's poses need both {KITTI_POSES} and {KITTI_CALIB}; "
+                        f"{absent} is missing")
     if kitti.is_file():
         camera = read_pose_lines(kitti, len(files), f"KITTI poses for {len(files)} images in {imgs}")
         poses, pose_file = camera_to_lidar_poses(camera, read_tr(calib)), KITTI_POSES
