@@ -17,6 +17,10 @@ each query's outcome (``results.<mode>.queries``: confidence, label, true place,
 rank of the nearest true place), so `rescore` recomputes its measures under newer definitions
 from what it holds. `load_records` rescores such records and reports the older ones it cannot
 rescore as problems with the command that recomputes them: no table mixes versions.
+
+A record whose method's weights were trained on its task's sequence says so in one line
+(``seen_in_training``, `safl_bench.training_data`; None otherwise, and in records made before
+the field existed, for which the leaderboard works it out from the weights they name).
 """
 
 from __future__ import annotations
