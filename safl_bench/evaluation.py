@@ -6,11 +6,16 @@ frame ("single_frame"), so a reader sees what the sequence search adds. Revisit 
 each query to the database frames it may match (`GroundTruth.db_limit`). Single-frame results
 also carry Recall@N (`RECALL_AT`), the retrieval literature's measure, from the same matrix.
 
-Two evaluation-level settings (`EvaluationConfig`; both off by default, the paper's protocol)
-reproduce the authors' public code (`safl_bench.matcher_presets`, preset "authors"):
-``max_frames`` keeps only the first N of the task's frames on both sides (their ``test_len``),
-and ``trim_queries`` matches every query but leaves the first and last N out of the metrics
-(their PR curve starts ``ds + 10`` queries in). The matches keep every query either way.
+Three evaluation-level settings (`EvaluationConfig`; all off by default, the paper's protocol)
+reproduce the authors' public code (`safl_bench.matcher_presets`, presets "authors",
+"authors-sad", "authors-2018"): ``max_frames`` keeps only the first N of the task's frames on
+both sides (their ``test_len``), ``trim_queries`` matches every query but leaves the first and
+last N out of the metrics (their PR curve starts some queries in), and ``distance`` says how
+descriptors are compared: "method" (the method's own `Method.distance`; Eq. 4's squared
+Euclidean for the learned methods) or "euclidean" (the plain L2 norm, ``np.linalg.norm`` of
+the difference, as the authors' ``Euclidean`` in src/util/utils.py lines 72-77 at commit
+``25be0fd``; contrast enhancement is not invariant to squaring). The matches keep every query
+either way.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from safl_bench.distance import euclidean
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.groundtruth import EXCLUDED, TP, GroundTruth
 from safl_bench.matching import MatcherConfig, MatchResult, match
@@ -41,7 +47,16 @@ MODES = ("sequence", "single_frame")
 
 
 #: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
-EVALUATION_SETTINGS = ("max_frames", "trim_queries")
+EVALUATION_SETTINGS = ("max_frames", "trim_queries", "distance")
+
+#: How descriptors may be compared (`EvaluationConfig.distance`).
+DISTANCES = ("method", "euclidean")
+
+#: Presets renamed since records were made: a record whose matcher settings name the old name
+#: and lack the ``distance`` setting (every record made before it existed) was made with the
+#: settings the new name now holds, and is read as that preset (`EvaluationConfig.from_dict`).
+#: "authors" followed the repository's later code until the paper-era preset took its name.
+RENAMED_PRESETS = {"authors": "authors-2018"}
 
 
 @dataclass(frozen=True)
@@ -51,11 +66,14 @@ class EvaluationConfig:
     max_frames: use only the first N frames of the task (of its every-`step`-th frames) as
     database AND queries (None: all). trim_queries: leave the first and the last N queries out
     of the metrics (they are still matched, and their trajectories use their neighbours).
+    distance: "method" (the method's own difference) or "euclidean" (plain L2 between the
+    descriptors; module docstring).
     """
 
     sequence: MatcherConfig = field(default_factory=MatcherConfig)
     max_frames: int | None = None
     trim_queries: int = 0
+    distance: str = "method"
 
     def __post_init__(self) -> None:
         n = self.max_frames
@@ -64,6 +82,8 @@ class EvaluationConfig:
         t = self.trim_queries
         if not isinstance(t, int) or isinstance(t, bool) or t < 0:
             raise ConfigError(f"trim_queries must be an integer >= 0, got {t!r}")
+        if self.distance not in DISTANCES:
+            raise ConfigError(f"distance must be one of {list(DISTANCES)}, got {self.distance!r}")
 
     @property
     def single_frame(self) -> MatcherConfig:
@@ -93,14 +113,18 @@ class EvaluationConfig:
     def from_dict(cls, data: dict[str, Any]) -> EvaluationConfig:
         """The config a record's ``matcher`` field describes (`to_dict`'s inverse; the
         single-frame settings follow from the sequence ones). A record made before a setting
-        existed is read with that setting's default, which is what its code did."""
+        existed is read with that setting's default, which is what its code did, and one made
+        under a preset name since renamed is read as the renamed preset (`RENAMED_PRESETS`)."""
         if not isinstance(data, dict) or not isinstance(data.get("sequence"), dict):
             raise ConfigError(f"matcher settings need a 'sequence' mapping, got {data!r}")
         extra = data.get("evaluation", {})
         if not isinstance(extra, dict) or set(extra) - set(EVALUATION_SETTINGS):
             raise ConfigError(f"evaluation settings: expected keys of {list(EVALUATION_SETTINGS)}, "
                               f"got {extra!r}")
-        return cls(MatcherConfig.from_dict(data["sequence"]), **extra)
+        sequence = data["sequence"]
+        if "distance" not in extra and sequence.get("preset") in RENAMED_PRESETS:
+            sequence = {**sequence, "preset": RENAMED_PRESETS[sequence["preset"]]}
+        return cls(MatcherConfig.from_dict(sequence), **extra)
 
 
 def same_settings(recorded: Any, wanted: dict[str, Any]) -> bool:
@@ -194,15 +218,16 @@ def describe_database(method: Method, database: Any,
 _MEMO_LIMIT = 8
 
 
-def difference_matrix(method: Method, queries: Any, database: Any,
+def difference_matrix(method: Method, queries: Any, database: Any, distance: str = "method",
                       memo: DatabaseMemo | None = None) -> tuple[np.ndarray, float, int]:
-    """Describe both sides and compare them; returns (D, seconds spent describing, frames).
+    """Describe both sides and compare them (`distance`: "method" = `Method.distance`,
+    "euclidean" = plain L2); returns (D, seconds spent describing, frames).
     `memo`: database descriptors described before in this process (`describe_database`)."""
     d_db, s_db = describe_database(method, database, memo)
     d_q, s_q = describe(method, queries)
     describe_s = s_db + s_q
     n = len(d_db) + len(d_q)
-    D = np.asarray(method.distance(d_q, d_db))
+    D = np.asarray(euclidean(d_q, d_db) if distance == "euclidean" else method.distance(d_q, d_db))
     if D.shape != (len(d_q), len(d_db)):
         raise DataError(
             f"method {method.name!r}: distance returned shape {D.shape}, "
@@ -229,7 +254,7 @@ def evaluate_method(
     if cfg.max_frames is not None:
         queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
         truth = subset_truth(truth, slice(0, cfg.max_frames), slice(0, cfg.max_frames))
-    D, describe_s, n = difference_matrix(method, queries, database, memo)
+    D, describe_s, n = difference_matrix(method, queries, database, cfg.distance, memo)
     limit = truth.db_limit() if revisit else None
     matches: dict[str, MatchResult] = {}
     seconds: dict[str, float] = {}

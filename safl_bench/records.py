@@ -17,6 +17,10 @@ each query's outcome (``results.<mode>.queries``: confidence, label, true place,
 rank of the nearest true place), so `rescore` recomputes its measures under newer definitions
 from what it holds. `load_records` rescores such records and reports the older ones it cannot
 rescore as problems with the command that recomputes them: no table mixes versions.
+
+A record whose method's weights were trained on its task's sequence says so in one line
+(``seen_in_training``, `safl_bench.training_data`; None otherwise, and in records made before
+the field existed, for which the leaderboard works it out from the weights they name).
 """
 
 from __future__ import annotations
@@ -123,6 +127,9 @@ class Metrics:
     extended_precision_of_correct: float | None = None
     n_scored: int | None = None
     n_correct: int | None = None
+    #: the authors' reading (recall over correct matches at the first precision >= 0.99;
+    #: metrics version 3), named apart from ours: `safl_bench.metrics`
+    authors_recall_at_99p: float | None = None
 
 
 @dataclass(frozen=True)
@@ -229,6 +236,9 @@ class ResultRecord:
     schema: int = SCHEMA_VERSION
     #: the version of `safl_bench.metrics` that scored it (a file without one is version 1)
     metrics_version: int = METRICS_VERSION
+    #: one line when the method's weights were trained on this task's sequence (None: not, or
+    #: unknown); `safl_bench.training_data`
+    seen_in_training: str | None = None
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -317,6 +327,7 @@ def mode_result_from_evaluation(evaluation: Evaluation,
             extended_precision_of_correct=float(evaluation.extended_precision_of_correct),
             n_scored=int(evaluation.n_scored),
             n_correct=int(evaluation.n_correct),
+            authors_recall_at_99p=float(evaluation.authors_recall_at_99p),
         ),
         precision=evaluation.precision,
         recall=evaluation.recall,
@@ -418,10 +429,13 @@ def new_record(
     environment: Environment | None = None,
 ) -> ResultRecord:
     """A record stamped now (UTC), with this process's environment unless one is given, scored
-    with this code's metrics version.
+    with this code's metrics version, marked when the method's weights were trained on the
+    task's sequence (`safl_bench.training_data.seen_note`).
 
     `matcher` may be a dict or a dataclass such as `MatcherConfig` (stored as JSON).
     """
+    from safl_bench.training_data import seen_note
+
     matcher_json = to_jsonable(matcher)
     if not isinstance(matcher_json, dict):
         raise ConfigError(f"matcher settings must be a mapping or dataclass, got {matcher!r}")
@@ -435,6 +449,8 @@ def new_record(
         environment=environment if environment is not None else collect_environment(),
         created=utc_now(),
         metrics_version=METRICS_VERSION,
+        seen_in_training=seen_note(method.params, task.source_kind, task.source_label,
+                                   task.sequence),
     )
 
 
@@ -779,7 +795,7 @@ def _parse_mode(r: _Reader, data: Any, where: str) -> ModeResult:
         recall_at_n=r.rates(m.get("recall_at_n"), f"{mw}.recall_at_n"),
         **{key: r.rate(m.get(key), f"{mw}.{key}") for key in (
             "recall_at_100_precision_of_correct", "f1_max_of_correct",
-            "extended_precision_of_correct")},
+            "extended_precision_of_correct", "authors_recall_at_99p")},
         n_scored=r.opt_int(m.get("n_scored"), f"{mw}.n_scored"),
         n_correct=r.opt_int(m.get("n_correct"), f"{mw}.n_correct"),
     )
@@ -881,6 +897,7 @@ def _parse_record(r: _Reader, data: Any) -> ResultRecord:
         created=created,
         schema=schema,
         metrics_version=_metrics_version(r, d, ""),
+        seen_in_training=r.opt_str(d.get("seen_in_training"), "seen_in_training"),
     )
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 from safl_bench.atomic import atomic_write_text
 from safl_bench.errors import DataError
 from safl_bench.leaderboard import figures as figs
+from safl_bench.leaderboard import table2
 from safl_bench.leaderboard.grouping import TableKey, group_records, slugify, table_key
 from safl_bench.leaderboard.headline import READING, facts_markdown
 from safl_bench.leaderboard.tables import (
@@ -217,6 +218,13 @@ def build_leaderboard(
                                 title=f"Sequence matcher by preset: {title}")))
                     writer.text(f"tables/{base}-{stem}.csv", by_preset.csv())
                     entry.inline.append(by_preset.markdown(level=4))
+                side = table2.side_by_side([*group, *presets])
+                if side:
+                    rel = writer.text(f"tables/{base}-table2-side-by-side.md",
+                                      table2.markdown(side, level=1))
+                    writer.text(f"tables/{base}-table2-side-by-side.csv", table2.csv(side))
+                    entry.tables.append(("Table II side by side", rel))
+                    entry.inline.append(table2.markdown(side, level=4))
             if figures:
                 entry.figures.append(
                     ("AUC heat map", writer.figure(heatmap, partial(figs.auc_heatmap, auc)))
