@@ -54,6 +54,7 @@ MOVED_MODULES: dict[str, str] = {
     "safl_bench.weights": "safl_bench.methods.weights",
     "safl_bench.descriptor_cache": "safl_bench.methods.descriptor_cache",
     "safl_bench.training": "safl_bench.methods.training",
+    "safl_bench.training_data": "safl_bench.methods.training_data",
     "safl_bench.distance": "safl_bench.methods.distance",
     "safl_bench.matcher_presets": "safl_bench.matching.presets",
     "safl_bench.matching_loop": "safl_bench.matching.loop",

@@ -213,3 +213,39 @@ def test_fit_input_resamples_only_other_sizes() -> None:
     small = fit_input(maps, 64)
     assert small.shape == (3, 64, 64) and 0.0 <= small.min() and small.max() <= 1.0
     assert abs(float(small.mean()) - float(maps.mean())) < 1e-3
+
+
+def _write_kitti_ground_truth(seq: Path, lidar: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """KITTI's files for LiDAR poses `lidar` moved by `shift` (m, per frame): camera poses
+    Tr L inv(Tr) and a calib.txt with a non-trivial Tr; returns the LiDAR poses written."""
+    tr = np.eye(4)
+    tr[:3, :3] = [[0, -1, 0], [0, 0, -1], [1, 0, 0]]  # LiDAR x forward -> camera z forward
+    tr[:3, 3] = [0.1, -0.2, 0.3]
+    moved = lidar.copy()
+    moved[:, :2, 3] += shift
+    camera = tr @ moved @ np.linalg.inv(tr)
+    (seq / "kitti_poses.txt").write_text(
+        "".join(" ".join(f"{v:.12e}" for v in p[:3].ravel()) + "\n" for p in camera))
+    (seq / "calib.txt").write_text(
+        "P0: " + " ".join(["0"] * 12) + "\nTr: " + " ".join(f"{v:.12e}" for v in tr[:3].ravel())
+        + "\n")
+    return moved
+
+
+def test_kitti_ground_truth_in_a_bev_root_wins_over_pose_txt(tmp_path: Path) -> None:
+    root = write_bev(tmp_path / "bev", n=20)
+    plain = bev_source(root)
+    before = plain.sequence("00")
+    shift = np.zeros((20, 2))
+    shift[5:9] = [0.7, -0.4]  # as BEVPlace's 00 differs from KITTI's on a stretch of frames
+    moved = _write_kitti_ground_truth(root / "00", before.poses, shift)
+    after = bev_source(root).sequence("00")
+    assert after.pose_file == "kitti_poses.txt"
+    np.testing.assert_allclose(after.poses, moved, atol=1e-9)
+    np.testing.assert_allclose(after.positions - before.positions, shift, atol=1e-9)
+    notes = bev_source(root).notes("00")
+    assert any("KITTI's ground truth" in n and "not pose.txt" in n for n in notes)
+    assert bev_source(root).fingerprint("00") != plain.fingerprint("00")
+    (root / "00" / "calib.txt").unlink()
+    with pytest.raises(DataError, match=r"kitti_poses.txt: KITTI's poses need both .* calib.txt"):
+        bev_source(root).sequence("00")

@@ -3,6 +3,7 @@ evaluation-level settings, --matcher-preset on the command line and `list matche
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from collections.abc import Iterator
@@ -14,7 +15,12 @@ import pytest
 from safl_bench import matcher_presets, matching, tasks
 from safl_bench.cli import main
 from safl_bench.errors import ConfigError
-from safl_bench.evaluation import EvaluationConfig, evaluate_method, same_settings
+from safl_bench.evaluation import (
+    EvaluationConfig,
+    difference_matrix,
+    evaluate_method,
+    same_settings,
+)
 from safl_bench.groundtruth import GroundTruth
 from safl_bench.mapconfig import MapConfig
 from safl_bench.matching import MatcherConfig
@@ -46,7 +52,7 @@ def test_paper_preset_is_the_old_defaults() -> None:
     assert {k: recorded["sequence"][k] for k in OLD_DEFAULTS} == OLD_DEFAULTS
     assert {k: recorded["single_frame"][k] for k in OLD_SINGLE} == OLD_SINGLE
     assert recorded["sequence"]["preset"] == "paper"
-    assert recorded["evaluation"] == {"max_frames": None, "trim_queries": 0}
+    assert recorded["evaluation"] == {"max_frames": None, "trim_queries": 0, "distance": "method"}
     assert paper.sequence.velocities().tolist() == [0.8, 0.9, 1.0, 1.1]
 
 
@@ -76,11 +82,17 @@ def test_paper_matches_are_those_of_a_default_config() -> None:
 def test_authors_preset_settings() -> None:
     cfg = matcher_presets.get("authors").config
     seq = cfg.sequence
-    assert (seq.enhance_window, seq.enhance_mode, seq.shift) == (20, "centred", False)
+    assert (seq.enhance_window, seq.enhance_mode, seq.shift) == (30, "centred", False)
     assert (seq.ds, seq.trajectory, seq.offset_rounding) == (10, "centred", "floor_start")
     assert (seq.edge_queries, seq.out_of_range) == ("skip", "exclude")
     assert (seq.score, seq.capped_match) == ("inverse", 1)
-    assert (cfg.max_frames, cfg.trim_queries) == (200, 20)
+    assert (cfg.max_frames, cfg.trim_queries, cfg.distance) == (300, 5, "euclidean")
+    later = matcher_presets.get("authors-2018").config
+    assert later.sequence == dataclasses.replace(seq, enhance_window=20, preset="authors-2018")
+    assert (later.max_frames, later.trim_queries, later.distance) == (200, 20, "method")
+    sad = matcher_presets.get("authors-sad").config
+    assert (sad.sequence.ds, sad.sequence.enhance_window, sad.sequence.shift) == (40, 10, True)
+    assert (sad.max_frames, sad.trim_queries, sad.distance) == (300, 20, "method")
     # getMatches: arange(int(vmin*ds), int(vmax*ds)+1) / ds with vmin 0.8, vmax 1.2: the same doubles
     theirs = np.arange(int(0.8 * 10), int(1.2 * 10) + 1).astype(float) / 10
     assert seq.velocities().tolist() == theirs.tolist()
@@ -175,7 +187,7 @@ def _ref_authors(D: np.ndarray, ds: int, window: int) -> tuple[np.ndarray, np.nd
 def test_authors_matcher_agrees_with_a_plain_loop_of_their_definition() -> None:
     D = np.random.default_rng(5).random((24, 40))
     res = matching.match(D, authors(dtype="float64"))
-    index, conf = _ref_authors(D, 10, 20)
+    index, conf = _ref_authors(D, 10, 30)
     np.testing.assert_array_equal(res.index, index)
     np.testing.assert_allclose(res.confidence, conf, rtol=1e-9)
 
@@ -239,7 +251,8 @@ def test_unknown_preset_says_did_you_mean_and_lists_them() -> None:
     with pytest.raises(ConfigError) as err:
         matcher_presets.configure("author")
     message = str(err.value)
-    assert "did you mean 'authors'?" in message and "paper, authors, openseqslam" in message
+    assert "did you mean 'authors'?" in message
+    assert "paper, authors, authors-sad, authors-2018, openseqslam" in message
     assert "\n" not in message
     with pytest.raises(ConfigError, match=r"--matcher: unknown setting\(s\) \['speed'\]; valid: \["):
         matcher_presets.configure("paper", {"speed": 2})
@@ -267,9 +280,15 @@ def test_cli_list_matchers(capsys: pytest.CaptureFixture[str]) -> None:
     assert "inverse *" in out and "floor_start *" in out
     assert main(["list", "matchers", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"paper", "authors", "openseqslam"}
+    assert set(data) == {"paper", "authors", "authors-sad", "authors-2018", "openseqslam"}
     assert data["authors"]["settings"]["capped_match"] == 1
     assert set(data["paper"]["settings"]) == {*matcher_presets.SETTINGS, "preset"}
+    for preset in data.values():  # every value cites where it comes from
+        assert set(preset["citations"]) == set(matcher_presets.SETTINGS)
+        assert all(preset["citations"].values())
+    assert data["authors"]["citations"]["distance"].startswith("src/util/utils.py:76@25be0fd")
+    assert data["authors"]["citations"]["enhance_window"] == (
+        "src/plot/SLFL/plotDraw_slfl.py:63@25be0fd (enhanceContrast(D, 30))")
 
 
 # --------------------------------------------------------------------------- on the command line
@@ -295,7 +314,8 @@ def test_cli_preset_refined_by_matcher_records_both(tiny_task, kitti_root, tmp_p
     seq = record["matcher"]["sequence"]
     assert (seq["preset"], seq["enhance_window"], seq["ds"]) == ("authors", 0, 4)
     assert (seq["score"], seq["shift"], seq["capped_match"]) == ("inverse", False, 1)
-    assert record["matcher"]["evaluation"] == {"max_frames": 200, "trim_queries": 2}
+    assert record["matcher"]["evaluation"] == {"max_frames": 300, "trim_queries": 2,
+                                               "distance": "euclidean"}
     assert matcher_presets.label(record["matcher"]) == "authors+ds=4,enhance_window=0,trim_queries=2"
     assert record["results"]["sequence"]["metrics"]["n_queries"] == 12 - 4
     # --score refines a preset only when given: openseqslam keeps its ratio
@@ -308,3 +328,30 @@ def test_cli_preset_refined_by_matcher_records_both(tiny_task, kitti_root, tmp_p
     assert main([*base, "--matcher-preset", "authorz"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "did you mean 'authors'?" in err[0] and err[0].startswith("safl-bench: error:")
+
+
+def test_records_made_as_authors_before_the_rename_read_as_authors_2018() -> None:
+    """A record made under the old name (no ``distance`` setting) holds what authors-2018 holds
+    now; one made under the new name is the paper-era preset."""
+    later = matcher_presets.get("authors-2018").config.to_dict()
+    old = json.loads(json.dumps(later).replace('"authors-2018"', '"authors"'))
+    del old["evaluation"]["distance"]
+    assert matcher_presets.label(old) == "authors-2018" and same_settings(old, later)
+    refined = json.loads(json.dumps(old))
+    refined["sequence"]["enhance_window"] = 30
+    assert matcher_presets.label(refined) == "authors-2018+enhance_window=30"
+    new = matcher_presets.get("authors").config.to_dict()
+    assert matcher_presets.label(new) == "authors" and not same_settings(old, new)
+
+
+def test_euclidean_distance_is_the_plain_l2_norm() -> None:
+    rng = np.random.default_rng(8)
+    views = rng.random((12, 3, 3)).astype(np.float32)
+    flat = views.reshape(12, -1).astype(np.float64)
+    want = np.linalg.norm(flat[:, None, :] - flat[None, :, :], axis=2)
+    D, _, _ = difference_matrix(Rows(), views, views, "euclidean")
+    np.testing.assert_allclose(D, want, rtol=1e-4, atol=1e-5)
+    D2, _, _ = difference_matrix(Rows(), views, views)
+    np.testing.assert_allclose(D2, want ** 2, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ConfigError, match="distance must be one of"):
+        EvaluationConfig(distance="cosine")

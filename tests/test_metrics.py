@@ -268,3 +268,30 @@ def test_the_positives_do_not_depend_on_the_answers(run: tuple) -> None:
     assert m.n_positive == int(has_true.sum())
     wrong_everywhere = metrics.evaluate(conf, np.zeros_like(correct), has_true)
     assert wrong_everywhere.n_positive == m.n_positive
+
+
+def test_authors_recall_is_their_reading_of_the_pr_curve() -> None:
+    """``authors_recall_at_99p``: plotPaper2.py lines 59-60 at commit 25be0fd, literally:
+    ``precision_recall_curve(is_correct, score)``, then the recall at the first index whose
+    precision is >= 0.99, over the correct matches."""
+    from sklearn.metrics import precision_recall_curve
+
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        n = int(rng.integers(5, 400))
+        correct = rng.random(n) < rng.uniform(0.3, 1.0)
+        conf = np.where(correct, rng.normal(1.0, 1.0, n), rng.normal(0.0, 1.0, n)).round(1)
+        if not correct.any():
+            continue
+        m = metrics.evaluate(conf, correct, np.ones(n, bool))
+        precision, recall, _ = precision_recall_curve(correct, conf)
+        recall_id = next(x for x in range(len(precision)) if precision[x] >= 0.99)
+        assert m.authors_recall_at_99p == pytest.approx(recall[recall_id], abs=1e-12)
+    # by hand: 100 queries, one wrong match among the 100 most confident: precision .99 there,
+    # so every correct match counts (1.0), where recall at 100 % precision stops before it
+    conf = np.arange(100, 0, -1, dtype=float)
+    correct = np.ones(100, bool)
+    correct[10] = False
+    m = metrics.evaluate(conf, correct, np.ones(100, bool))
+    assert m.authors_recall_at_99p == 1.0 and m.recall_at_100 == pytest.approx(0.10)
+    assert metrics.evaluate([0.5, 0.4], [F, F], [T, T]).authors_recall_at_99p == 0.0

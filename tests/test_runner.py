@@ -14,6 +14,7 @@ from safl_bench import runner, tasks
 from safl_bench.cli import main
 from safl_bench.mapconfig import MapConfig
 from safl_bench.method_registry import make_method
+from safl_bench.metrics import METRICS_VERSION
 from safl_bench.records import load_record
 
 TASKS = ("Test/TinyRun-T1R1-v0", "Test/TinyRun-T5R1-v0")
@@ -244,7 +245,7 @@ def test_a_record_of_an_older_metrics_version_is_rescored_or_recomputed(tiny_tas
     first.path.write_text(json.dumps(data))
     again = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path))
     assert again.status == "rescored" and again.record is not None
-    assert again.record.metrics_version == 2
+    assert again.record.metrics_version == METRICS_VERSION
     assert again.record.results["sequence"].metrics.f1_max == pytest.approx(good)
     assert again.record.created == json.loads(first.path.read_text())["created"]
     # a real version-1 record holds no outcomes: recomputed, keeping the run's timings
@@ -254,7 +255,7 @@ def test_a_record_of_an_older_metrics_version_is_rescored_or_recomputed(tiny_tas
     said: list[str] = []
     redone = runner.run_cell(sad, tiny_tasks[0], options(kitti_root, tmp_path), log=said.append)
     assert redone.status == "computed" and "metrics version 1" in said[0]
-    assert redone.record is not None and redone.record.metrics_version == 2
+    assert redone.record is not None and redone.record.metrics_version == METRICS_VERSION
     assert redone.record.timings.describe_ms_per_frame == data["timings"]["describe_ms_per_frame"]
     assert "timed by the run of" in redone.record.timings.how_run
     assert redone.record.results["sequence"].metrics.f1_max == pytest.approx(good)

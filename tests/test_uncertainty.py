@@ -16,7 +16,8 @@ NAMES = {"recall_at_100_precision": "recall_at_100",
          "f1_max": "f1_max", "f1_max_of_correct": "f1_max_of_correct",
          "extended_precision": "extended_precision",
          "extended_precision_of_correct": "extended_precision_of_correct",
-         "auc": "roc_auc", "recall_at_1": "recall_at_1"}
+         "auc": "roc_auc", "recall_at_1": "recall_at_1",
+         "authors_recall_at_99p": "authors_recall_at_99p"}
 
 
 @settings(max_examples=60, deadline=None)

@@ -158,7 +158,7 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
         queries, database, q_top, db_top = queries[:n], database[:n], q_top[:n], db_top[:n]
         truth = subset_truth(truth, slice(0, n), slice(0, n))
     D, _, _ = difference_matrix(described, method_input(described, queries),
-                                method_input(described, database))
+                                method_input(described, database), config.distance)
     limit = truth.db_limit() if task.spec.protocol == "revisit" else None
     result = match(D, config.sequence, db_limit=limit)
     enhanced = enhanced_matrix(D, config.sequence)

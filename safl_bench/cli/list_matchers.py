@@ -17,12 +17,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Print the presets, then one table: a row per setting, a column per preset."""
+    """Print the presets, then one table: a row per setting, a column per preset, then each
+    preset's every value with the file and line (or the part of the paper) it comes from."""
     from safl_bench.matching import presets as mp
 
     presets = [mp.get(name) for name in mp.names()]
     if args.json:
-        print(json.dumps({p.name: {"description": p.description, "settings": mp.settings(p.config)}
+        print(json.dumps({p.name: {"description": p.description, "settings": mp.settings(p.config),
+                                   "citations": {k: mp.citation(p, k) for k in mp.SETTINGS}}
                           for p in presets}, indent=2))
         return 0
     width = max(len(p.name) for p in presets)
@@ -41,4 +43,10 @@ def main(args: argparse.Namespace) -> int:
         rows.append([name, *values, mp.SETTING_HELP.get(name, "")])
     print(format_table(rows, ["setting", *[p.name for p in presets], "what it sets"]))
     print(f"* differs from {mp.DEFAULT}")
+    print()
+    print("Where each value comes from (file:line@commit of CNN-GAN/Top-Mapping, or the paper):")
+    for p in presets:
+        print(f"  {p.name}:")
+        for name in mp.SETTINGS:
+            print(f"    {name} = {mp.format_value(mp.settings(p.config)[name])}: {mp.citation(p, name)}")
     return 0

@@ -36,6 +36,8 @@ KITTI_TRAIN_SEQUENCES = ("01", "02", "03", "04", "05", "06", "07", "08")
 #: evaluation only, so training takes 02.
 BEV_TRAIN_SEQUENCES = ("02",)
 BEV_HELD_OUT = ("00", "05", "06")
+#: The paper protocol's test sequence (KITTI 00): training on it is warned about, never refused.
+TEST_SEQUENCE = "00"
 
 #: Validation tasks logged per epoch by default (the second test sequence, not the headline one).
 DEFAULT_VAL_CONDITIONS = ("T1R1", "T10R1.5")
@@ -158,6 +160,10 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError("--synth-seed applies to the synthetic data only, not with --kitti-root or --bev-root")
     if kind == "kitti":
         sequences = args.sequences.split(",") if args.sequences else list(KITTI_TRAIN_SEQUENCES)
+        if TEST_SEQUENCE in sequences:
+            print(f"safl-bench: warning: training on {TEST_SEQUENCE}, the paper protocol's test "
+                  "sequence: the weights record it, and their scores on it are marked as seen in "
+                  "training", file=sys.stderr)
         source: DataSource = kitti_source(args.kitti_root)
         tag = "kitti"
     elif kind == "bev":
@@ -165,7 +171,8 @@ def main(args: argparse.Namespace) -> int:
         held_out = sorted(set(sequences) & set(BEV_HELD_OUT))
         if held_out:
             print(f"safl-bench: warning: training on {', '.join(held_out)}: KITTI 00 is the test "
-                  "sequence and 05, 06 are for evaluation only", file=sys.stderr)
+                  "sequence and 05, 06 are for evaluation only; the weights record it, and their "
+                  "scores there are marked as seen in training", file=sys.stderr)
         source = bev_source(args.bev_root, args.bev_resolution)
         tag = "bev"
     else:
@@ -191,8 +198,11 @@ def main(args: argparse.Namespace) -> int:
     print(f"training {cls.name} on {len(maps)} maps of {source.label} {', '.join(sequences)} -> {out}", file=sys.stderr)
     method.fit(maps, checkpoint_dir=out, callback=callback, progress=progress)
 
-    method.save(out / "model.safetensors", parts=("encoder", "decoder"))
-    method.save(out / f"{cls.name}.safetensors", parts=("encoder",))
+    from safl_bench.methods.training_data import TrainedOn
+
+    trained_on = TrainedOn(source.kind, source.label, tuple(sequences), args.step).to_dict()
+    method.save(out / "model.safetensors", parts=("encoder", "decoder"), trained_on=trained_on)
+    method.save(out / f"{cls.name}.safetensors", parts=("encoder",), trained_on=trained_on)
     save_reconstructions(method, maps, out / "reconstructions.png")
 
     from safl_bench.common.atomic import atomic_write_json

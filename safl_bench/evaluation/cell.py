@@ -6,11 +6,16 @@ frame ("single_frame"), so a reader sees what the sequence search adds. Revisit 
 each query to the database frames it may match (`GroundTruth.db_limit`). Single-frame results
 also carry Recall@N (`RECALL_AT`), the retrieval literature's measure, from the same matrix.
 
-Two evaluation-level settings (`EvaluationConfig`; both off by default, the paper's protocol)
-reproduce the authors' public code (`safl_bench.matching.presets`, preset "authors"):
-``max_frames`` keeps only the first N of the task's frames on both sides (their ``test_len``),
-and ``trim_queries`` matches every query but leaves the first and last N out of the metrics
-(their PR curve starts ``ds + 10`` queries in). The matches keep every query either way.
+Three evaluation-level settings (`EvaluationConfig`; all off by default, the paper's protocol)
+reproduce the authors' public code (`safl_bench.matching.presets`, presets "authors",
+"authors-sad", "authors-2018"): ``max_frames`` keeps only the first N of the task's frames on
+both sides (their ``test_len``), ``trim_queries`` matches every query but leaves the first and
+last N out of the metrics (their PR curve starts some queries in), and ``distance`` says how
+descriptors are compared: "method" (the method's own `Method.distance`; Eq. 4's squared
+Euclidean for the learned methods) or "euclidean" (the plain L2 norm, ``np.linalg.norm`` of
+the difference, as the authors' ``Euclidean`` in src/util/utils.py lines 72-77 at commit
+``25be0fd``; contrast enhancement is not invariant to squaring). The matches keep every query
+either way.
 """
 
 from __future__ import annotations
@@ -35,11 +40,14 @@ from safl_bench.evaluation.metrics import (
 )
 from safl_bench.matching.matcher import MatchResult, match
 from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they were defined here)
+    DISTANCES,
     EVALUATION_SETTINGS,
     MODES,
+    RENAMED_PRESETS,
     EvaluationConfig,
     same_settings,
 )
+from safl_bench.methods.distance import euclidean
 from safl_bench.methods.method import Method
 
 
@@ -122,15 +130,16 @@ def describe_database(method: Method, database: Any,
 _MEMO_LIMIT = 8
 
 
-def difference_matrix(method: Method, queries: Any, database: Any,
+def difference_matrix(method: Method, queries: Any, database: Any, distance: str = "method",
                       memo: DatabaseMemo | None = None) -> tuple[np.ndarray, float, int]:
-    """Describe both sides and compare them; returns (D, seconds spent describing, frames).
+    """Describe both sides and compare them (`distance`: "method" = `Method.distance`,
+    "euclidean" = plain L2); returns (D, seconds spent describing, frames).
     `memo`: database descriptors described before in this process (`describe_database`)."""
     d_db, s_db = describe_database(method, database, memo)
     d_q, s_q = describe(method, queries)
     describe_s = s_db + s_q
     n = len(d_db) + len(d_q)
-    D = np.asarray(method.distance(d_q, d_db))
+    D = np.asarray(euclidean(d_q, d_db) if distance == "euclidean" else method.distance(d_q, d_db))
     if D.shape != (len(d_q), len(d_db)):
         raise DataError(
             f"method {method.name!r}: distance returned shape {D.shape}, "
@@ -157,7 +166,7 @@ def evaluate_method(
     if cfg.max_frames is not None:
         queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
         truth = subset_truth(truth, slice(0, cfg.max_frames), slice(0, cfg.max_frames))
-    D, describe_s, n = difference_matrix(method, queries, database, memo)
+    D, describe_s, n = difference_matrix(method, queries, database, cfg.distance, memo)
     limit = truth.db_limit() if revisit else None
     matches: dict[str, MatchResult] = {}
     seconds: dict[str, float] = {}

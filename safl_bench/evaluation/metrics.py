@@ -1,4 +1,4 @@
-"""Loop-closure metrics: every measure defined once, by name (metrics version 2).
+"""Loop-closure metrics: every measure defined once, by name (metrics version 3).
 
 Orientation: the matcher's score is LOWER = better; every measure here reads a CONFIDENCE, HIGHER
 = more confident. `confidence_from_score` is the one place the sign is flipped (a score of +inf,
@@ -50,6 +50,7 @@ The measures (each a fraction in [0, 1]; in a record's ``metrics``):
 | ``recall_at_100_precision`` | max R(tau) over the thresholds with FP(tau) = 0 (0 when the most confident match is wrong) | P |
 | ``recall_at_100_precision_of_correct`` | the same in Rc | C |
 | ``recall_at_precision[_of_correct]`` (`evaluate` only) | max R (Rc) over the thresholds with precision >= ``precision_level`` (the authors' 0.99) | P (C) |
+| ``authors_recall_at_99p`` | the authors' reading: Rc at the FIRST point of the PR curve (thresholds increasing) whose precision is >= 0.99 (``AUTHORS_PRECISION``), ``recall[[x for x in range(len(precision)) if precision[x] >= 0.99][0]]`` of ``precision_recall_curve(is_correct, 1/S)`` (src/plot/plotPaper2.py lines 59-60, the curve of src/plot/SLFL/plotDraw_slfl.py line 128, at commit ``25be0fd``); recall only falls along the curve, so this is the largest Rc with precision >= 0.99 | C |
 | ``f1_max`` | max over tau of 2 Pr R / (Pr + R) | P |
 | ``f1_max_of_correct`` | the same with Rc | C |
 | ``extended_precision`` | (P_R0 + R_P100) / 2 (Ferrarini et al.): P_R0 = precision at the most confident threshold, R_P100 = ``recall_at_100_precision`` | P |
@@ -70,9 +71,16 @@ query without a true place, or no positive at all (`NoPositivesError`: recall is
 runner names the task) raise DataError. No correct match gives 0 for every recall, F1 and
 extended precision (said in ``notes``); one class only gives ``auc = None``.
 
+``authors_recall_at_99p`` differs from ``recall_at_100_precision`` in two ways at once: one
+wrong match in a hundred accepted is allowed, and the recall is over the correct matches (a
+method that answers a query wrongly loses nothing by it). Named apart so that nobody reads one
+for the other; tables show both.
+
 ``METRICS_VERSION`` is stored in every record: version 1 (records without it) divided recall by
 the queries with a true place whose match was not ambiguous (so P depended on the method) and
-counted queries without a candidate in the AUC; it had no ``_of_correct`` measures.
+counted queries without a candidate in the AUC; it had no ``_of_correct`` measures. Version 2
+had no ``authors_recall_at_99p``; everything else is version 3's (a version-2 record holds its
+per-query outcomes, so `safl_bench.results.records.rescore` adds it).
 """
 
 from __future__ import annotations
@@ -89,7 +97,10 @@ from safl_bench.errors import ConfigError, DataError
 from safl_bench.matching.confidence import confidence_from_score  # noqa: F401  (re-exported)
 
 #: The version of these definitions; records store it (`safl_bench.results.records`).
-METRICS_VERSION = 2
+METRICS_VERSION = 3
+
+#: The precision at which the paper's authors read their recall (``authors_recall_at_99p``).
+AUTHORS_PRECISION = 0.99
 
 #: The N of the Recall@N that single-frame results report.
 RECALL_AT = (1, 5, 10)
@@ -142,6 +153,7 @@ class Metrics:
     precision_level: float
     recall_at_precision: float
     recall_at_precision_of_correct: float
+    authors_recall_at_99p: float  # Rc at the first point with precision >= 0.99 (the authors')
     precision_at_min_recall: float  # P_R0
     extended_precision: float
     extended_precision_of_correct: float
@@ -242,6 +254,14 @@ def _best_recall(recall: np.ndarray, keep: np.ndarray) -> float:
     return float(recall[keep].max()) if keep.any() else 0.0
 
 
+def _authors_recall(precision: np.ndarray, recall_of_correct: np.ndarray) -> float:
+    """The authors' reading of the PR curve (``authors_recall_at_99p``): the recall over
+    correct matches at its first point (thresholds increasing, the final (1, 0) included) with
+    precision >= ``AUTHORS_PRECISION``."""
+    first = int(np.flatnonzero(precision >= AUTHORS_PRECISION)[0])
+    return float(recall_of_correct[first])
+
+
 def _f1(p: np.ndarray, r: np.ndarray) -> float:
     with np.errstate(invalid="ignore", divide="ignore"):
         f1 = np.where(p + r > 0, 2 * p * r / (p + r), 0.0)
@@ -319,6 +339,7 @@ def evaluate_outcomes(
         precision_level=float(precision_level),
         recall_at_precision=_best_recall(r, at_level),
         recall_at_precision_of_correct=_best_recall(rc, at_level),
+        authors_recall_at_99p=_authors_recall(precision, recall_c),
         precision_at_min_recall=p_r0,
         extended_precision=(p_r0 + r100) / 2, extended_precision_of_correct=(p_r0 + rc100) / 2,
         f1_max=_f1(p, r), f1_max_of_correct=_f1(p, rc),

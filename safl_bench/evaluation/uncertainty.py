@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from safl_bench.errors import DataError
-from safl_bench.evaluation.metrics import AMBIGUOUS, CORRECT, Outcomes
+from safl_bench.evaluation.metrics import AMBIGUOUS, AUTHORS_PRECISION, CORRECT, Outcomes
 
 #: Replicates of the bootstrap, and the seed of its random numbers (deterministic intervals).
 REPLICATES = 1000
@@ -48,7 +48,7 @@ def measure_names() -> tuple[str, ...]:
     """The measures `bootstrap` computes, named as in records (`safl_bench.results.records.Metrics`)."""
     return ("recall_at_100_precision", "recall_at_100_precision_of_correct", "f1_max",
             "f1_max_of_correct", "extended_precision", "extended_precision_of_correct", "auc",
-            "recall_at_1", "recall_at_5", "recall_at_10")
+            "authors_recall_at_99p", "recall_at_1", "recall_at_5", "recall_at_10")
 
 
 def block_weights(n: int, replicates: int, rng: np.random.Generator, block: int = BLOCK) -> np.ndarray:
@@ -79,7 +79,8 @@ def _count_blocks(starts: np.ndarray, n: int, block: int) -> np.ndarray:  # prag
 #: The measures the kernel writes, in its output's column order.
 _KERNEL_MEASURES = ("recall_at_1", "recall_at_100_precision", "recall_at_100_precision_of_correct",
                     "f1_max", "f1_max_of_correct", "extended_precision",
-                    "extended_precision_of_correct", "auc", "recall_at_5", "recall_at_10")
+                    "extended_precision_of_correct", "auc", "authors_recall_at_99p",
+                    "recall_at_5", "recall_at_10")
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -110,6 +111,7 @@ def _row(w: np.ndarray, out: np.ndarray, has_true: np.ndarray, correct: np.ndarr
     r100 = 0.0
     f1 = 0.0
     f1c = 0.0
+    a99 = 0.0  # TP at the least confident threshold with precision >= 0.99 (the authors' reading)
     p_r0 = 0.0
     seen = False
     for g in range(desc.shape[0]):
@@ -128,6 +130,8 @@ def _row(w: np.ndarray, out: np.ndarray, has_true: np.ndarray, correct: np.ndarr
             seen = True
         if fp == 0 and tp > r100:
             r100 = tp
+        if tp / decided >= AUTHORS_PRECISION and tp > a99:
+            a99 = tp
         f1 = max(f1, 2 * tp / (decided + pos))
         f1c = max(f1c, 2 * tp / (decided + n_correct))
     # ROC AUC: correct against wrong and unanswered, ties counted half
@@ -162,8 +166,9 @@ def _row(w: np.ndarray, out: np.ndarray, has_true: np.ndarray, correct: np.ndarr
     out[5] = (p_r0 + r_at_100) / 2
     out[6] = (p_r0 + r_of_correct) / 2 if pos > 0 else nan
     out[7] = auc_num / denom if denom > 0 else nan
-    out[8] = n5 / pos if pos > 0 else nan
-    out[9] = n10 / pos if pos > 0 else nan
+    out[8] = (a99 / n_correct if n_correct > 0 else 0.0) if pos > 0 else nan
+    out[9] = n5 / pos if pos > 0 else nan
+    out[10] = n10 / pos if pos > 0 else nan
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -171,8 +176,8 @@ def _weighted_kernel(w: np.ndarray, has_true: np.ndarray, correct: np.ndarray, w
                      desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray, asc_end: np.ndarray,
                      neg: np.ndarray, hit5: np.ndarray,
                      hit10: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """(R, 10): `_row` for every row of weights `w` (R, N)."""
-    out = np.empty((w.shape[0], 10))
+    """(R, 11): `_row` for every row of weights `w` (R, N)."""
+    out = np.empty((w.shape[0], len(_KERNEL_MEASURES)))
     for r in range(w.shape[0]):
         _row(w[r], out[r], has_true, correct, wrong, desc, desc_end, asc, asc_end, neg, hit5, hit10)
     return out
@@ -183,11 +188,11 @@ def _block_kernel(starts: np.ndarray, block: int, has_true: np.ndarray, correct:
                   wrong: np.ndarray, desc: np.ndarray, desc_end: np.ndarray, asc: np.ndarray,
                   asc_end: np.ndarray, neg: np.ndarray, hit5: np.ndarray,
                   hit10: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
-    """(R, 10): `_row` for the circular block resamples whose blocks start at `starts` (R, B):
+    """(R, 11): `_row` for the circular block resamples whose blocks start at `starts` (R, B):
     the weights `block_weights` would give, counted one replicate at a time (no (R, N) matrix),
     replicates in parallel."""
     n = has_true.shape[0]
-    out = np.empty((starts.shape[0], 10))
+    out = np.empty((starts.shape[0], len(_KERNEL_MEASURES)))
     for r in numba.prange(starts.shape[0]):
         w = np.zeros(n)
         drawn = 0

@@ -33,6 +33,7 @@ from safl_bench.common.atomic import atomic_write_text
 from safl_bench.errors import DataError
 from safl_bench.evaluation.metrics import METRICS_VERSION
 from safl_bench.leaderboard import figures as figs
+from safl_bench.leaderboard import table2
 from safl_bench.leaderboard.grouping import TableKey, group_records, slugify, table_key
 from safl_bench.leaderboard.headline import READING, facts_markdown
 from safl_bench.leaderboard.report import BuildReport, PublishedTable, headline_rank
@@ -61,7 +62,7 @@ UNKNOWN_SOURCE = "data source not recorded in the log"
 #: the text names it by its old path, which still imports, so the committed tables stay byte-identical).
 RECALL_NOTE = (
     f"Recall is over the queries with a true place (the same for every method on a task: fixed "
-    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.metrics`); recall over "
+    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.evaluation.metrics`); recall over "
     "correct matches (the paper's authors' and VPR-Bench's convention) is in the `_of_correct` "
     "columns of tables/all-results.csv.")
 
@@ -184,6 +185,13 @@ def build_leaderboard(
                                 title=f"Sequence matcher by preset: {title}")))
                     writer.text(f"tables/{base}-{stem}.csv", by_preset.csv())
                     entry.inline.append(by_preset.markdown(level=4))
+                side = table2.side_by_side([*group, *presets])
+                if side:
+                    rel = writer.text(f"tables/{base}-table2-side-by-side.md",
+                                      table2.markdown(side, level=1))
+                    writer.text(f"tables/{base}-table2-side-by-side.csv", table2.csv(side))
+                    entry.tables.append(("Table II side by side", rel))
+                    entry.inline.append(table2.markdown(side, level=4))
             if figures:
                 entry.figures.append(
                     ("AUC heat map", writer.figure(heatmap, partial(figs.auc_heatmap, auc)))

@@ -182,9 +182,9 @@ def seeds_sentence(table: Table) -> str:
             if len(table.seeds) == 1 else
             f"Mean over seeds {seeds} [95 % interval over seeds and queries]; a cell with other "
             "seeds names them")
-    # `safl_bench.uncertainty`: the module's old path (it still imports), kept in the published text
+    # `safl_bench.evaluation.uncertainty`: the module's old path (it still imports), kept in the published text
     # so that the committed tables regenerate byte for byte
-    return (f"{what} (two-level block bootstrap, `safl_bench.uncertainty`). **Bold**: best of its "
+    return (f"{what} (two-level block bootstrap, `safl_bench.evaluation.uncertainty`). **Bold**: best of its "
             "column and matching mode beyond the noise (the paired difference to every other "
             "excludes 0); ≈: tied for best (not resolved). Missing cells (not run) show "
             f"{MISSING}.")
@@ -201,7 +201,12 @@ def _version_key(version: str) -> tuple[int, ...] | tuple[str]:
 
 def _row_sort_key(row: RowKey) -> tuple[object, ...]:
     mode_rank = MODES.index(row[2]) if row[2] in MODES else -1
-    return (row[0], _version_key(row[1]), row[1], mode_rank, row[2])
+    version = row[1].removesuffix(SEEN_MARK)
+    return (row[0], _version_key(version), version, row[1] != version, mode_rank, row[2])
+
+
+#: Appended to the version of a row whose records' weights were trained on the task's sequence.
+SEEN_MARK = " (seen in training)"
 
 
 class Value(NamedTuple):
@@ -230,15 +235,22 @@ def _build(
     extract: Extractor,
     notes: Iterable[str] = (),
 ) -> Table:
+    from safl_bench.methods.training_data import record_seen
+
     seeds = seed_set(records)
     values: dict[tuple[RowKey, str], dict[int, float | None]] = defaultdict(dict)
     sources: dict[tuple[RowKey, str], dict[int, ResultRecord]] = defaultdict(dict)
     probe: dict[tuple[RowKey, str], tuple[str, str | None]] = {}
+    seen_rows: set[RowKey] = set()
     for record in records:
+        seen = record_seen(record) is not None
         for v in extract(record):
-            values[(v.row, v.column)][record.seed] = v.value
-            sources[(v.row, v.column)][record.seed] = record
-            probe[(v.row, v.column)] = (v.mode, v.measure)
+            row = (v.row[0], v.row[1] + SEEN_MARK, v.row[2]) if seen else v.row
+            if seen:
+                seen_rows.add(row)
+            values[(row, v.column)][record.seed] = v.value
+            sources[(row, v.column)][record.seed] = record
+            probe[(row, v.column)] = (v.mode, v.measure)
     rows = sorted({row for row, _ in values}, key=_row_sort_key)
     with_intervals = intervals.enabled()
     bootstrapped = any(measure is not None for _, measure in probe.values())
@@ -260,8 +272,8 @@ def _build(
             groups: dict[str, list[intervals.Ranked]] = defaultdict(list)
             for i, row in enumerate(rows):
                 cell = cells[i][j]
-                if cell is None or cell.mean is None:
-                    continue
+                if cell is None or cell.mean is None or row in seen_rows:
+                    continue  # a cell seen in training is never ranked beside clean ones
                 mode, measure = probe[(row, column)]
                 groups[row[2]].append(intervals.Ranked(
                     i, cell.mean, float(fmt.number(cell.mean)),
@@ -289,6 +301,11 @@ def _build(
         all_notes.append("Cells without an interval come from records without per-query outcomes "
                          "(metrics version 1): never marked best; `safl-bench run --force` "
                          "recomputes them.")
+    if seen_rows:
+        all_notes.append(f"Rows whose version says '{SEEN_MARK.strip()}': the method's weights "
+                         "were trained on this task's sequence (`safl_bench.methods.training_data`); "
+                         "their scores measure memory, not generalisation, and are never ranked "
+                         "beside the other rows.")
     all_notes.extend(_matcher_notes(records))
     return Table(
         title=title,
@@ -597,6 +614,7 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                         m.recall_at_100_precision_of_correct, 4),
                     "f1_max_of_correct": _num(m.f1_max_of_correct, 4),
                     "extended_precision_of_correct": _num(m.extended_precision_of_correct, 4),
+                    "authors_recall_at_99p": _num(m.authors_recall_at_99p, 4),
                     "n_queries": m.n_queries,
                     "n_scored": UNDEFINED if m.n_scored is None else m.n_scored,
                     "n_positives": m.n_positives,

@@ -2,10 +2,9 @@
 
 `EvaluationConfig` is what every record's ``matcher`` field holds and what a preset
 (`safl_bench.matching.presets`) names: the sequence matcher's `MatcherConfig` (the single-frame
-settings follow from it) and two evaluation-level settings that reproduce the authors' public
-code, both off by default (the paper's protocol): ``max_frames`` keeps only the first N of the
-task's frames on both sides (their ``test_len``) and ``trim_queries`` matches every query but
-leaves the first and last N out of the metrics (their PR curve starts ``ds + 10`` queries in).
+settings follow from it) and three evaluation-level settings that reproduce the authors' public
+code, all off by default (the paper's protocol): ``max_frames``, ``trim_queries`` and
+``distance`` (`safl_bench.evaluation.cell`'s docstring says what each does).
 It lives with the matcher, not with the evaluation that reads it, so that the presets need
 nothing of a later stage.
 """
@@ -23,7 +22,16 @@ MODES = ("sequence", "single_frame")
 
 
 #: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
-EVALUATION_SETTINGS = ("max_frames", "trim_queries")
+EVALUATION_SETTINGS = ("max_frames", "trim_queries", "distance")
+
+#: How descriptors may be compared (`EvaluationConfig.distance`).
+DISTANCES = ("method", "euclidean")
+
+#: Presets renamed since records were made: a record whose matcher settings name the old name
+#: and lack the ``distance`` setting (every record made before it existed) was made with the
+#: settings the new name now holds, and is read as that preset (`EvaluationConfig.from_dict`).
+#: "authors" followed the repository's later code until the paper-era preset took its name.
+RENAMED_PRESETS = {"authors": "authors-2018"}
 
 
 @dataclass(frozen=True)
@@ -33,11 +41,14 @@ class EvaluationConfig:
     max_frames: use only the first N frames of the task (of its every-`step`-th frames) as
     database AND queries (None: all). trim_queries: leave the first and the last N queries out
     of the metrics (they are still matched, and their trajectories use their neighbours).
+    distance: "method" (the method's own difference) or "euclidean" (plain L2 between the
+    descriptors; module docstring).
     """
 
     sequence: MatcherConfig = field(default_factory=MatcherConfig)
     max_frames: int | None = None
     trim_queries: int = 0
+    distance: str = "method"
 
     def __post_init__(self) -> None:
         n = self.max_frames
@@ -46,6 +57,8 @@ class EvaluationConfig:
         t = self.trim_queries
         if not isinstance(t, int) or isinstance(t, bool) or t < 0:
             raise ConfigError(f"trim_queries must be an integer >= 0, got {t!r}")
+        if self.distance not in DISTANCES:
+            raise ConfigError(f"distance must be one of {list(DISTANCES)}, got {self.distance!r}")
 
     @property
     def single_frame(self) -> MatcherConfig:
@@ -75,14 +88,18 @@ class EvaluationConfig:
     def from_dict(cls, data: dict[str, Any]) -> EvaluationConfig:
         """The config a record's ``matcher`` field describes (`to_dict`'s inverse; the
         single-frame settings follow from the sequence ones). A record made before a setting
-        existed is read with that setting's default, which is what its code did."""
+        existed is read with that setting's default, which is what its code did, and one made
+        under a preset name since renamed is read as the renamed preset (`RENAMED_PRESETS`)."""
         if not isinstance(data, dict) or not isinstance(data.get("sequence"), dict):
             raise ConfigError(f"matcher settings need a 'sequence' mapping, got {data!r}")
         extra = data.get("evaluation", {})
         if not isinstance(extra, dict) or set(extra) - set(EVALUATION_SETTINGS):
             raise ConfigError(f"evaluation settings: expected keys of {list(EVALUATION_SETTINGS)}, "
                               f"got {extra!r}")
-        return cls(MatcherConfig.from_dict(data["sequence"]), **extra)
+        sequence = data["sequence"]
+        if "distance" not in extra and sequence.get("preset") in RENAMED_PRESETS:
+            sequence = {**sequence, "preset": RENAMED_PRESETS[sequence["preset"]]}
+        return cls(MatcherConfig.from_dict(sequence), **extra)
 
 
 def same_settings(recorded: Any, wanted: dict[str, Any]) -> bool:

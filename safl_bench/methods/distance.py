@@ -5,7 +5,10 @@ as ``|q|^2 + |b|^2 - 2 q.b`` so that the bulk of the work is one BLAS matrix pro
 descriptors are first centred on the database mean (the distance is translation invariant), which
 keeps the norms small and limits the cancellation of the expansion in float32. The result is
 clamped at 0. Work is done in query chunks so that temporaries stay small: the only large array
-is the (Nq, Ndb) output itself.
+is the (Nq, Ndb) output itself. `euclidean` is its square root: the plain L2 norm that the
+paper's authors compare descriptors with (``Euclidean`` in src/util/utils.py lines 72-77 at
+commit ``25be0fd`` of CNN-GAN/Top-Mapping), which the evaluation setting ``distance=euclidean``
+selects (`safl_bench.evaluation.cell`).
 """
 
 from __future__ import annotations
@@ -70,3 +73,13 @@ def sqeuclidean(
         block += bn[None, :]
         np.maximum(block, 0.0, out=block)
     return out
+
+
+def euclidean(queries: np.ndarray, database: np.ndarray, *, dtype: str = "float32") -> np.ndarray:
+    """Euclidean (L2, not squared) distances, shape (Nq, Ndb), lower = more similar, in `dtype`.
+
+    The square root of `sqeuclidean` computed in float64: the root magnifies the expansion's
+    cancellation near 0 (a float32 square of 1e-7 would become a distance of 3e-4)."""
+    if dtype not in _DTYPES:
+        raise DataError(f"dtype must be one of {sorted(_DTYPES)}, got {dtype!r}")
+    return np.sqrt(sqeuclidean(queries, database, dtype="float64")).astype(_DTYPES[dtype])

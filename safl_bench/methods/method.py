@@ -218,13 +218,17 @@ class Method:
         if tensors:
             raise DataError(f"{source}: {self.name} has no learned state but the file holds tensors")
 
-    def save(self, path: str | Path, *, parts: Sequence[str] | None = None) -> Path:
-        """Write the learned state and the constructor parameters to a safetensors file."""
+    def save(self, path: str | Path, *, parts: Sequence[str] | None = None,
+             trained_on: dict[str, Any] | None = None) -> Path:
+        """Write the learned state and the constructor parameters to a safetensors file, with
+        the data it was trained on (`safl_bench.methods.training_data.TrainedOn.to_dict`) when given."""
         from safl_bench.methods.weights import save_tensors
 
         record = self.config()
         record.pop("weights", None)
         meta = {"kind": "method", "method": record, "parts": list(parts) if parts else None}
+        if trained_on is not None:
+            meta["trained_on"] = trained_on
         save_tensors(path, self.state_tensors(parts), meta)
         return Path(path)
 
@@ -265,6 +269,8 @@ class Method:
             "saved_version": info.get("version"),
             "parts": meta.get("parts"),
         }
+        if isinstance(meta.get("trained_on"), dict):
+            method.weights_info["trained_on"] = meta["trained_on"]
         return method
 
 

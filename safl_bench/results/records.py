@@ -20,6 +20,10 @@ each query's outcome (``results.<mode>.queries``: confidence, label, true place,
 rank of the nearest true place), so `rescore` recomputes its measures under newer definitions
 from what it holds. `load_records` rescores such records and reports the older ones it cannot
 rescore as problems with the command that recomputes them: no table mixes versions.
+
+A record whose method's weights were trained on its task's sequence says so in one line
+(``seen_in_training``, `safl_bench.methods.training_data`; None otherwise, and in records made before
+the field existed, for which the leaderboard works it out from the weights they name).
 """
 
 from __future__ import annotations
@@ -195,6 +199,9 @@ class Metrics:
     extended_precision_of_correct: Rate | None = None
     n_scored: Count | None = None
     n_correct: Count | None = None
+    #: the authors' reading (recall over correct matches at the first precision >= 0.99;
+    #: metrics version 3), named apart from ours: `safl_bench.evaluation.metrics`
+    authors_recall_at_99p: Rate | None = None
 
 
 @dataclass(frozen=True)
@@ -319,6 +326,9 @@ class ResultRecord:
     schema: Annotated[Count, AfterValidator(_supported_schema)] = SCHEMA_VERSION
     #: the version of `safl_bench.evaluation.metrics` that scored it (a file without one is version 1)
     metrics_version: MetricsVersion = METRICS_VERSION
+    #: one line when the method's weights were trained on this task's sequence (None: not, or
+    #: unknown); `safl_bench.methods.training_data`
+    seen_in_training: Text | None = None
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -407,6 +417,7 @@ def mode_result_from_evaluation(evaluation: Evaluation,
             extended_precision_of_correct=float(evaluation.extended_precision_of_correct),
             n_scored=int(evaluation.n_scored),
             n_correct=int(evaluation.n_correct),
+            authors_recall_at_99p=float(evaluation.authors_recall_at_99p),
         ),
         precision=evaluation.precision,
         recall=evaluation.recall,
@@ -508,10 +519,13 @@ def new_record(
     environment: Environment | None = None,
 ) -> ResultRecord:
     """A record stamped now (UTC), with this process's environment unless one is given, scored
-    with this code's metrics version.
+    with this code's metrics version, marked when the method's weights were trained on the
+    task's sequence (`safl_bench.methods.training_data.seen_note`).
 
     `matcher` may be a dict or a dataclass such as `MatcherConfig` (stored as JSON).
     """
+    from safl_bench.methods.training_data import seen_note
+
     matcher_json = to_jsonable(matcher)
     if not isinstance(matcher_json, dict):
         raise ConfigError(f"matcher settings must be a mapping or dataclass, got {matcher!r}")
@@ -525,6 +539,8 @@ def new_record(
         environment=environment if environment is not None else collect_environment(),
         created=utc_now(),
         metrics_version=METRICS_VERSION,
+        seen_in_training=seen_note(method.params, task.source_kind, task.source_label,
+                                   task.sequence),
     )
 
 

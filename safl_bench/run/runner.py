@@ -542,6 +542,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     their range. A method column only when there are several; a failed seed gets its own row."""
     from safl_bench.evaluation.uncertainty import bootstrap
     from safl_bench.matching.presets import label
+    from safl_bench.methods.training_data import record_seen
     from safl_bench.results.records import seed_outcomes
 
     by_method = len({o.method for o in outcomes}) > 1
@@ -549,7 +550,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     header = (*lead, "task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC",
               "R@100%P 1-frame", "R@1 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
-    no_interval = False
+    no_interval = any_seen = False
     for method, task_id, cell in _cells(outcomes):
         records = [o.record for o in cell if o.record is not None]
         first = records[0]
@@ -571,8 +572,11 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         status = ", ".join(f"{s} {statuses.count(s)}" if len(statuses) > 1 else s
                            for s in dict.fromkeys(statuses))
         seq, single = shown["sequence"], shown["single_frame"]
+        seen = record_seen(first) is not None
+        any_seen = any_seen or seen
         rows.append((
-            *((method,) if by_method else ()), task_id, format_seed_list([o.seed for o in cell]),
+            *((method,) if by_method else ()), task_id + (" (seen in training)" if seen else ""),
+            format_seed_list([o.seed for o in cell]),
             label(first.matcher), seq["recall_at_100_precision"], seq["f1_max"],
             seq["recall_at_1"], seq["auc"], single["recall_at_100_precision"],
             single["recall_at_1"], timing, status,
@@ -591,6 +595,9 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
               "median over the seeds' records [their range]")
     extra = ["note: some records hold no per-query outcomes (metrics version 1): their cells show "
              "the mean only; `safl-bench run --force` recomputes them"] if no_interval else []
+    if any_seen:
+        extra.append("note: (seen in training): the method's weights were trained on that task's "
+                     "sequence; its scores measure memory, not generalisation")
     note = zeros_note(outcomes)
     return "\n".join([*lines, legend, *extra] + ([note] if note else []))
 

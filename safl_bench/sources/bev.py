@@ -6,8 +6,19 @@ Layout, relative to the root (BEVPlace's published `data/KITTI/`, Luo et al., IC
                             151 x 151: a count of 0.4 m voxels per pixel, scaled to 0-255)
     <seq>/pose.txt          12 numbers a line (3x4 row-major): the LiDAR pose of each frame
     <seq>/times.txt         optional: one timestamp (s) per frame
+    <seq>/kitti_poses.txt   optional, with calib.txt: KITTI's ground-truth poses of the sequence
+                            (its ``poses/<seq>.txt``: camera 0, 12 numbers a line)
+    <seq>/calib.txt         optional, with kitti_poses.txt: KITTI's ``calib.txt`` of the
+                            sequence, with its ``Tr:`` line (LiDAR -> camera 0)
 
 Choices, and why:
+- Ground truth: when a sequence carries KITTI's poses and calibration, they WIN over
+  `pose.txt`: the LiDAR poses are ``inv(Tr) P Tr`` (`safl_bench.sources.kitti`), what KITTI's
+  odometry benchmark defines. BEVPlace's ``00/pose.txt`` is written with 6 decimals on frames
+  3350-3849 and differs there from KITTI's ground truth by up to 1.08 m; the rest of 00, 02, 05
+  and 06 equal KITTI's to 1e-14 m (/work/shared/kitti-poses). One file without the other is an
+  error, not a silent fallback. Which poses a sequence used is in its `notes` (so in every
+  record) and both files are part of its fingerprint.
 - Positions are x and y of the LiDAR pose (columns 3 and 7 of `pose.txt`), the ground plane;
   BEVPlace's published Recall@1 is reproduced with x and y, not x and z.
 - The image centre is the sensor, forward (LiDAR x) up and left (LiDAR y) left, as in this
@@ -35,7 +46,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -43,13 +54,15 @@ from safl_bench.common.atomic import atomic_path
 from safl_bench.common.fingerprint import fingerprint
 from safl_bench.errors import DataError
 from safl_bench.sources.base import DataSource, file_stat
-from safl_bench.sources.kitti import read_pose_lines, read_times
+from safl_bench.sources.kitti import camera_to_lidar_poses, read_pose_lines, read_times, read_tr
 
 DEFAULT_RESOLUTION_M = 0.4
 #: Frame period assumed without `times.txt` (KITTI's LiDAR runs at 10 Hz).
 ASSUMED_PERIOD_S = 0.1
 BEV_ROOT_ENV = "SAFL_BEV_ROOT"
 IMAGE_CACHE_VERSION = 1
+#: Optional files of a sequence that carry KITTI's ground truth (module docstring).
+KITTI_POSES, KITTI_CALIB = "kitti_poses.txt", "calib.txt"
 
 
 @dataclass(eq=False)
@@ -62,6 +75,8 @@ class BevSequence:
     poses: np.ndarray  # (n, 4, 4) LiDAR poses
     times: np.ndarray
     times_assumed: bool
+    #: the file the poses come from: pose.txt, or kitti_poses.txt (with calib.txt's Tr)
+    pose_file: str = "pose.txt"
     _images: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
@@ -95,12 +110,21 @@ def open_bev_sequence(root: Path, name: str) -> BevSequence:
     if not pose_path.is_file():
         raise DataError(f"{pose_path}: missing (the LiDAR pose of each frame, 12 numbers a line)")
     poses = read_pose_lines(pose_path, len(files), f"pose lines for {len(files)} images in {imgs}")
+    pose_file = "pose.txt"
+    kitti, calib = folder / KITTI_POSES, folder / KITTI_CALIB
+    if kitti.is_file() != calib.is_file():
+        present, absent = (kitti, calib) if kitti.is_file() else (calib, kitti)
+        raise DataError(f"{present}: KITTI's poses need both {KITTI_POSES} and {KITTI_CALIB}; "
+                        f"{absent} is missing")
+    if kitti.is_file():
+        camera = read_pose_lines(kitti, len(files), f"KITTI poses for {len(files)} images in {imgs}")
+        poses, pose_file = camera_to_lidar_poses(camera, read_tr(calib)), KITTI_POSES
     times_path = folder / "times.txt"
     if times_path.is_file():
         times, assumed = read_times(times_path, len(files)), False
     else:
         times, assumed = np.arange(len(files), dtype=np.float64) / (1.0 / ASSUMED_PERIOD_S), True
-    return BevSequence(name, folder, files, poses, times, assumed)
+    return BevSequence(name, folder, files, poses, times, assumed, pose_file)
 
 
 def decode_image(path: Path) -> np.ndarray:
@@ -168,13 +192,25 @@ class BevSource(DataSource):
         stats = [file_stat(p) for p in seq.image_files]
         return fingerprint("bev", str(self.root.resolve()), str(name), self.resolution_m,
                            [p.name for p in seq.image_files], stats,
-                           file_stat(seq.folder / "pose.txt"), file_stat(seq.folder / "times.txt"))
+                           file_stat(seq.folder / "pose.txt"), file_stat(seq.folder / "times.txt"),
+                           *self._kitti_stats(seq))
+
+    @staticmethod
+    def _kitti_stats(seq: BevSequence) -> list[Any]:
+        """The KITTI pose files' stats when the sequence uses them ([] otherwise: fingerprints
+        of folders without them are as before)."""
+        if seq.pose_file == "pose.txt":
+            return []
+        return [file_stat(seq.folder / KITTI_POSES), file_stat(seq.folder / KITTI_CALIB)]
 
     def notes(self, name: str) -> list[str]:
         seq = self.sequence(name)
         out = [f"top views: the images of {seq.folder / 'imgs'}, {self.resolution_m:g} m per pixel"]
         if seq.times_assumed:
             out.append(f"no {seq.folder / 'times.txt'}: frames taken as 10 Hz")
+        if seq.pose_file != "pose.txt":
+            out.append(f"poses: KITTI's ground truth ({seq.folder / KITTI_POSES} with "
+                       f"{KITTI_CALIB}'s Tr), not pose.txt")
         return out
 
     def image_cache_path(self, name: str) -> Path:
