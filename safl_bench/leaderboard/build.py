@@ -62,7 +62,7 @@ UNKNOWN_SOURCE = "data source not recorded in the log"
 #: the text names it by its old path, which still imports, so the committed tables stay byte-identical).
 RECALL_NOTE = (
     f"Recall is over the queries with a true place (the same for every method on a task: fixed "
-    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.evaluation.metrics`); recall over "
+    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.metrics`); recall over "
     "correct matches (the paper's authors' and VPR-Bench's convention) is in the `_of_correct` "
     "columns of tables/all-results.csv.")
 

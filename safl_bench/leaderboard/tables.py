@@ -182,9 +182,9 @@ def seeds_sentence(table: Table) -> str:
             if len(table.seeds) == 1 else
             f"Mean over seeds {seeds} [95 % interval over seeds and queries]; a cell with other "
             "seeds names them")
-    # `safl_bench.evaluation.uncertainty`: the module's old path (it still imports), kept in the published text
+    # `safl_bench.uncertainty`: the module's old path (it still imports), kept in the published text
     # so that the committed tables regenerate byte for byte
-    return (f"{what} (two-level block bootstrap, `safl_bench.evaluation.uncertainty`). **Bold**: best of its "
+    return (f"{what} (two-level block bootstrap, `safl_bench.uncertainty`). **Bold**: best of its "
             "column and matching mode beyond the noise (the paired difference to every other "
             "excludes 0); ≈: tied for best (not resolved). Missing cells (not run) show "
             f"{MISSING}.")
@@ -302,8 +302,10 @@ def _build(
                          "(metrics version 1): never marked best; `safl-bench run --force` "
                          "recomputes them.")
     if seen_rows:
+        # `safl_bench.training_data`: the old path of methods.training_data (it still imports),
+        # kept in the published text so that the committed tables regenerate byte for byte
         all_notes.append(f"Rows whose version says '{SEEN_MARK.strip()}': the method's weights "
-                         "were trained on this task's sequence (`safl_bench.methods.training_data`); "
+                         "were trained on this task's sequence (`safl_bench.training_data`); "
                          "their scores measure memory, not generalisation, and are never ranked "
                          "beside the other rows.")
     all_notes.extend(_matcher_notes(records))
