@@ -98,13 +98,25 @@ def test_seeds_share_the_cells_timing_and_database_and_records_stay_the_same(
         return plain(method, views)
 
     monkeypatch.setattr(evaluation, "describe", counted)
+    from safl_bench import sources
+
+    opened: list[str] = []
+    open_source = sources.open_source
+
+    def counted_open(task_spec, **kwargs):  # type: ignore[no-untyped-def]
+        opened.append(task_spec.id)
+        return open_source(task_spec, **kwargs)
+
+    monkeypatch.setattr(sources, "open_source", counted_open)
     sad = make_method("sad", size=16)
     alone = runner.run_grid([sad], [NOISY], runner.RunOptions(
         results_dir=tmp_path / "alone", kitti_root=str(kitti_root), progress=False,
         timing_frames=2, timing_repeats=1, share_seeds=False))
     described_alone, sizes[:] = len(sizes), []
+    opened_alone, opened[:] = len(opened), []
     shared = runner.run_grid([sad], [NOISY], _options(kitti_root, tmp_path / "shared"))
     assert described_alone == 6 and len(sizes) == 4  # one database for the three seeds' queries
+    assert opened_alone == 3 and len(opened) == 1  # the data opened once for the three seeds
     assert [o.seed for o in shared] == [0, 1, 2]
     first = shared[0].record
     assert first is not None and "measured at seed" not in first.timings.how_run

@@ -17,12 +17,13 @@ def test_bench_seeds_prints_both_ratios_and_the_interval_share(bev_root: Path, s
     result = seeds_bench.run(str(bev_root), ["sad"], repeats=1)
     assert os.environ.get("SAFL_HOME") == home  # each run's scratch home is undone
     figures = result["methods"]["sad"]
-    assert len(figures["one_s"]) == len(figures["shared_s"]) == len(figures["alone_s"]) == 1
+    assert len(figures["one_s"]) == len(figures["shared_s"]) == len(figures["alone_cpu_s"]) == 1
+    assert figures["cpu_ratio_shared"] == pytest.approx(figures["shared_cpu_s"][0] / figures["one_cpu_s"][0])
     assert figures["ratio_shared"] == pytest.approx(figures["shared_s"][0] / figures["one_s"][0])
     assert figures["ratio_alone"] == pytest.approx(figures["alone_s"][0] / figures["one_s"][0])
     assert 0 < figures["interval_share"] < 1
     text = seeds_bench.format_results(result)
-    assert "sad: one seed" in text and "(target <= 2.5x)" in text and "(target <= 5 %)" in text
+    assert "sad: one seed" in text and "process CPU time" in text and "(target <= 2.5x)" in text and "(target <= 5 %)" in text
 
 
 def test_bench_seeds_needs_images_and_a_task_with_seeds(monkeypatch: pytest.MonkeyPatch,

@@ -11,7 +11,8 @@ and no cached views (a scratch `$SAFL_HOME` each, as `bench parallel` does), so 
 includes rendering its noisy queries and the first seed's includes reading the clean views; an
 untimed one-seed run first warms the process (imports, compiled kernels, the image files in the
 page cache). The ratios are medians over the repeats of (five-seed time / one-seed time of the
-same repeat).
+same repeat), of wall time and of the process's CPU time (all its threads), which other work on
+a shared machine moves much less than wall time.
 
 The interval overhead is the bootstrap of the five-seed cell in both matching modes (what the
 run table computes for it, `uncertainty.bootstrap`; median of `repeats` after one untimed call)
@@ -26,6 +27,7 @@ import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -39,8 +41,9 @@ SEEDS = 5
 
 
 def _timed_run(method: Method, task_id: str, bev_root: str, n_seeds: int, share: bool
-               ) -> tuple[float, list[Any]]:
-    """Seconds of `run_grid` of one cell at `n_seeds` seeds from a scratch home, and its outcomes."""
+               ) -> tuple[float, float, list[Any]]:
+    """Wall and process CPU seconds of `run_grid` of one cell at `n_seeds` seeds from a scratch
+    home, and its outcomes."""
     from safl_bench.run import runner
 
     before = os.environ.get("SAFL_HOME")
@@ -49,10 +52,10 @@ def _timed_run(method: Method, task_id: str, bev_root: str, n_seeds: int, share:
         try:
             options = runner.RunOptions(results_dir=Path(scratch) / "results", bev_root=bev_root,
                                         progress=False, share_seeds=share)
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             outcomes = runner.run_grid([method], [task_id], options, n_seeds=n_seeds,
                                        log=lambda message: None)
-            seconds = time.perf_counter() - t0
+            seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         finally:
             if before is None:
                 os.environ.pop("SAFL_HOME", None)
@@ -61,7 +64,7 @@ def _timed_run(method: Method, task_id: str, bev_root: str, n_seeds: int, share:
     failed = [o.message for o in outcomes if o.record is None]
     if failed:
         raise ConfigError(f"a benchmark cell of {method.name} on {task_id} failed: {failed[0]}")
-    return seconds, outcomes
+    return seconds, cpu, outcomes
 
 
 def _interval_seconds(outcomes: Sequence[Any], repeats: int) -> float:
@@ -82,6 +85,12 @@ def _interval_seconds(outcomes: Sequence[Any], repeats: int) -> float:
     return timing.time_call(run, name="bootstrap", repeats=repeats, warmup=1, memory=False).median_s
 
 
+def _ratio(runs: dict[str, list[float]], key: str) -> float:
+    """Median over the repeats of runs[key] / the one-seed figure of the same kind and repeat."""
+    one = runs["one_cpu_s" if key.endswith("cpu_s") else "one_s"]
+    return statistics.median(s / o for s, o in zip(runs[key], one, strict=True))
+
+
 def run(bev_root: str, methods: Sequence[str] | None = None, *, task_id: str = DEFAULT_TASK,
         repeats: int = 3) -> dict[str, Any]:
     """Every figure, JSON-ready."""
@@ -97,20 +106,24 @@ def run(bev_root: str, methods: Sequence[str] | None = None, *, task_id: str = D
     for name in methods or DEFAULT_METHODS:
         method = make_method(name)
         _timed_run(method, task_id, bev_root, 1, True)  # warm-up
-        runs: dict[str, list[float]] = {"one_s": [], "shared_s": [], "alone_s": []}
+        runs: dict[str, list[float]] = {f"{k}_{c}": [] for k in ("one", "shared", "alone")
+                                        for c in ("s", "cpu_s")}
         outcomes: list[Any] = []
         for _ in range(repeats):
-            runs["one_s"].append(_timed_run(method, task_id, bev_root, 1, True)[0])
-            seconds, outcomes = _timed_run(method, task_id, bev_root, SEEDS, True)
-            runs["shared_s"].append(seconds)
-            runs["alone_s"].append(_timed_run(method, task_id, bev_root, SEEDS, False)[0])
-        ratio = {k: statistics.median(s / o for s, o in zip(runs[k], runs["one_s"], strict=True))
-                 for k in ("shared_s", "alone_s")}
+            for label, n, share in (("one", 1, True), ("shared", SEEDS, True),
+                                    ("alone", SEEDS, False)):
+                seconds, cpu, got = _timed_run(method, task_id, bev_root, n, share)
+                runs[f"{label}_s"].append(seconds)
+                runs[f"{label}_cpu_s"].append(cpu)
+                outcomes = got if label == "shared" else outcomes
+        ratio = partial(_ratio, runs)
+
         interval_s = _interval_seconds(outcomes, repeats)
         shared = statistics.median(runs["shared_s"])
         out["methods"][name] = {
             **runs,
-            "ratio_shared": ratio["shared_s"], "ratio_alone": ratio["alone_s"],
+            "ratio_shared": ratio("shared_s"), "ratio_alone": ratio("alone_s"),
+            "cpu_ratio_shared": ratio("shared_cpu_s"), "cpu_ratio_alone": ratio("alone_cpu_s"),
             "interval_s": interval_s, "interval_share": interval_s / shared,
         }
     out["environment"] = asdict(timing.environment())
@@ -127,6 +140,9 @@ def format_results(r: dict[str, Any]) -> str:
             f"  {name}: one seed {one:.1f} s; {r['seeds']} seeds sharing the cell's timing and "
             f"database {shared:.1f} s -> {m['ratio_shared']:.2f}x (target <= 2.5x); each seed "
             f"alone {alone:.1f} s -> {m['ratio_alone']:.2f}x")
+        lines.append(
+            f"  {name}: process CPU time (less moved by other work on the machine): sharing "
+            f"{m['cpu_ratio_shared']:.2f}x, each seed alone {m['cpu_ratio_alone']:.2f}x")
         lines.append(
             f"  {name}: intervals of the {r['seeds']}-seed cell (bootstrap, both matching modes) "
             f"{m['interval_s']:.2f} s = {100 * m['interval_share']:.1f} % of the cell "

@@ -17,7 +17,8 @@ is taken once per (method, task), at the first seed the run computes, and the ot
 records carry it, saying so in `how_run` ("the cell's timing, measured at seed S"); the database
 descriptors are described once per method and database (the clean database views of a cell's
 seeds, and of the paper conditions of one sequence, are the same frames), the seconds they took
-carried into each record's throughput. Everything else of a record (matches, outcomes, metrics)
+carried into each record's throughput; and in a serial run the cells of one data source and
+sequence open it once (its poses, times and decoded images are read once). Everything else of a record (matches, outcomes, metrics)
 is what it would be alone: methods describe each view independently of the others
 (`check_method`). `share_seeds=False` describes and times every seed on its own (what
 `safl-bench bench seeds` compares against).
@@ -61,6 +62,7 @@ from safl_bench.results.records import (
 )
 from safl_bench.run.timing import pinned, time_describe
 from safl_bench.sources import ROOT_OPTION
+from safl_bench.sources.base import DataSource
 from safl_bench.tasks import registry, spec, suite
 from safl_bench.tasks.registry import runnable_spec
 from safl_bench.tasks.spec import TaskSpec
@@ -187,10 +189,10 @@ def _existing(
 
 
 def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool,
-          method: Method | None = None) -> Task:
+          method: Method | None = None, source: DataSource | None = None) -> Task:
     """The cell's task: the registered spec at the cell's seed, its views rendered in the
     encoding `method` reads (`Method.view_encoding`, on sources with scans; an image source's
-    views are its images)."""
+    views are its images); on `source` when given (opened by another cell of the same data)."""
     run_spec = registered if seed == registered.seed else dataclasses.replace(registered, seed=seed)
     encoding = getattr(method, "view_encoding", None)
     if encoding and run_spec.map_config is not None and run_spec.map_config.encoding != encoding:
@@ -198,7 +200,8 @@ def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool,
 
         run_spec = dataclasses.replace(run_spec, map_config=config_for_encoding(encoding))
     return Task.from_spec(run_spec, kitti_root=options.kitti_root, bev_root=options.bev_root,
-                          bev_resolution_m=options.bev_resolution_m, progress=progress)
+                          bev_resolution_m=options.bev_resolution_m, progress=progress,
+                          source=source)
 
 
 def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunOptions,
@@ -506,14 +509,26 @@ def _prepare_views(
     """Open the tasks of the cells to compute and render all their views first, in as few passes
     over the scans as possible (`prepare_tasks`: the twelve paper conditions of a sequence in
     one pass, not twelve), on the workers when there are some. Cells whose task or views fail
-    are recorded in `outcomes`; returns the others' tasks."""
+    are recorded in `outcomes`; returns the others' tasks. In a serial run that shares across
+    seeds (`RunOptions.share_seeds`) the cells of one source and sequence open it once, so its
+    sequence (poses, times, the decoded images of an image source) is read once, not per seed."""
     tasks: dict[int, Task] = {}
+    serial = parallel is None or parallel.serial
+    sources: dict[tuple[object, ...], DataSource] = {}
     for i, seed in todo.items():
         _, task_id, opts = cells[i]
+        registered = spec(task_id)
+        key = (registered.source, registered.data_seed, registered.sequence)
+        share = serial and opts.share_seeds
         try:
-            tasks[i] = _task(spec(task_id), seed, opts, progress, cells[i][0])
+            tasks[i] = _task(registered, seed, opts, progress, cells[i][0],
+                             sources.get(key) if share else None)
         except SaflError as exc:
             outcomes[i] = failed(i, str(exc))
+            continue
+        opened = tasks[i].source
+        if share and opened is not None:
+            sources.setdefault(key, opened)
     for kind in dict.fromkeys(cells[i][0].input_kind for i in tasks):
         members = [i for i in tasks if cells[i][0].input_kind == kind]
         problems = prepare_tasks([tasks[i] for i in members], (kind,), parallel=parallel,
