@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
-from record_factory import SYNTH_LABEL, make_record
+from record_factory import SYNTH_LABEL, make_record, scored_record
 
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import DataError
@@ -102,7 +102,6 @@ def test_a_cell_with_other_seeds_than_the_table_names_them() -> None:
 
 
 def test_cells_carry_bootstrap_intervals_and_bold_means_better_beyond_the_noise() -> None:
-    from record_factory import scored_record
 
     records = [scored_record(m, seed=s, skill=k, variant=v, condition="T1R1")
                for m, k, v in (("strong", 0.95, 0), ("weak", 0.3, 0)) for s in range(3)]
@@ -401,3 +400,38 @@ def test_real_kitti_paper_tables_gain_one_table_by_matcher_preset(tmp_path) -> N
     assert rows[0] == "| Method | Version | Matcher | T1R1 | T5R1 |"
     assert rows[1:] == ["| sad | 1 | authors | 40.0 | 40.0 |", "| sad | 1 | paper | 0.0 | 0.0 |"]  # sorted by name
     assert "Sequence matcher by preset" in (tmp_path / "lb/index.md").read_text()
+
+
+def test_table_ii_side_by_side_reads_the_authors_presets_and_says_which_cells_hold_the_paper(tmp_path) -> None:
+    """Under the authors' paper-era presets (authors-sad for SAD, authors for the learned
+    features) each cell's mean [interval] stands beside the paper's value, with whether the
+    paper's value is inside; records of any other preset are not read; the site shows it too."""
+    from dataclasses import replace
+
+    from safl_bench.leaderboard import table2
+    from safl_bench.matching.presets import configure
+
+    def record(method: str, preset: str, seed: int, skill: float) -> object:
+        base = scored_record(method, seed=seed, skill=skill, condition="T1R1", source_kind="bev",
+                             source_label="KITTI top-view images")
+        return replace(base, matcher=configure(preset).to_dict())
+
+    paper = [record("sad", "paper", s, 0.7) for s in range(2)]
+    presets = [record("sad", "authors-sad", s, 0.99) for s in range(2)]
+    presets += [record("stable_afl", "authors", s, 0.99) for s in range(2)]
+    presets += [record("bigan", "authors-sad", s, 0.99) for s in range(2)]  # not BiGAN's preset
+    rows = table2.side_by_side([*paper, *presets])
+    by = {(r.method, r.condition): r for r in rows}
+    assert [r.method for r in rows if r.condition == "T1R1"] == ["sad", "stable_afl"]
+    sad, safl = by[("sad", "T1R1")], by[("stable_afl", "T1R1")]
+    assert sad.paper == 28.3 and safl.paper == 90.9 and sad.seeds == (0, 1)
+    iv = sad.ours["recall_at_100_precision"]
+    assert iv is not None and iv.low <= iv.mean <= iv.high
+    assert sad.inside("recall_at_100_precision") == (iv.low * 100 - 0.05 <= 28.3 <= iv.high * 100 + 0.05)
+    assert by[("sad", "T5R1")].seeds == () and by[("sad", "T5R1")].inside("recall_at_100_precision") is None
+    build_leaderboard(paper, tmp_path / "lb", figures=False, preset_records=presets)
+    md = (tmp_path / "lb/tables/kitti-top-view-images/paper-00-v0-table2-side-by-side.md").read_text()
+    assert md.startswith("# Table II side by side") and "| SAD | 1 | T1R1 | 28.3 | 0,1 |" in md
+    assert "| BiGAN |" not in md and "not run" in md
+    page = (tmp_path / "lb/site/kitti-top-view-images-paper-00-v0.html").read_text()
+    assert '<section class="table2"' in page and "<td>28.3</td>" in page

@@ -191,6 +191,7 @@ def build_leaderboard(
                                       table2.markdown(side, level=1))
                     writer.text(f"tables/{base}-table2-side-by-side.csv", table2.csv(side))
                     entry.tables.append(("Table II side by side", rel))
+                    report.table2[key] = (side, rel)
                     entry.inline.append(table2.markdown(side, level=4))
             if figures:
                 entry.figures.append(

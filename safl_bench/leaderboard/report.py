@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from safl_bench.leaderboard.grouping import TableKey
+from safl_bench.leaderboard.table2 import Row
 from safl_bench.leaderboard.tables import Table
 from safl_bench.results.records import Problem, ResultRecord
 
@@ -47,6 +48,8 @@ class BuildReport:
     tables: list[PublishedTable] = field(default_factory=list)
     figure_links: dict[TableKey, list[tuple[str, str]]] = field(default_factory=dict)
     training_figures: list[tuple[str, str, list[str]]] = field(default_factory=list)
+    #: Table II beside ours (`table2.side_by_side`), per table group that has it, with its Markdown
+    table2: dict[TableKey, tuple[list[Row], str]] = field(default_factory=dict)
 
 
 def headline_rank(key: TableKey) -> tuple[object, ...]:

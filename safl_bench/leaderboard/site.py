@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from safl_bench.common.atomic import atomic_write_text
+from safl_bench.leaderboard import table2
 from safl_bench.leaderboard.grouping import TableKey, slugify
 from safl_bench.leaderboard.headline import READING, facts
 from safl_bench.leaderboard.intervals import BEST, TIED, without_intervals
@@ -154,7 +155,7 @@ def write_site(
         def body(reg: _Registry, page: _Page = page, figures: list[tuple[str, str]] = figures) -> str:
             return f"<h1>{_e(page.title)}</h1>" + "".join(
                 _table_section(t, out, reg, figures=figures if i == 0 else ())
-                for i, t in enumerate(page.tables))
+                for i, t in enumerate(page.tables)) + _table2_section(report, page.key)
 
         emit(page.file, body, page.title, page.tables)
     every = [t for page in pages for t in page.tables]
@@ -244,6 +245,25 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
         + (f'<ul class="notes">{notes}</ul>' if notes else "")
         + "</section>"
     )
+
+
+def _table2_section(report: BuildReport, key: TableKey | None) -> str:
+    """The paper's Table II beside ours (`table2`), on the page of its table group; '' if none."""
+    if key is None or key not in report.table2:
+        return ""
+    rows, md = report.table2[key]
+    head = "".join(f'<th scope="col">{_e(h)}</th>' for h in table2.header())
+    body = "".join(
+        "<tr>" + "".join(f'<td class="outside">{_e(c)}</td>' if h == "inside" and c == "no"
+                         else f"<td>{_e(c)}</td>" for h, c in zip(table2.header(), table2.cells(row), strict=True))
+        + "</tr>" for row in rows)
+    summary = "".join(f"<li>{_inline_code(line[2:])}</li>" for line in table2.summary(rows))
+    return (f'<section class="table2" id="table2-{_e(slugify(key.stem))}">'
+            f"<h2>{_e(table2.TITLE)}</h2><p>{_inline_code(table2.INTRO)}</p>"
+            f'<p class="meta"><a class="source-md" href="../{_e(md)}">Markdown</a> · '
+            f'<a href="../{_e(md[:-3] + ".csv")}">CSV</a></p>'
+            f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+            f'</div><ul class="notes">{summary}</ul></section>')
 
 
 def _cell(table: Table, i: int, j: int, fmt: ValueFormat, mark: str | None,
@@ -407,6 +427,7 @@ th{background:var(--head);cursor:pointer;user-select:none;position:relative}th[d
 th[aria-sort=ascending]::after{content:" ▲";font-size:.7em}th[aria-sort=descending]::after{content:" ▼";font-size:.7em}
 tbody tr:nth-child(even){background:#fafbfc}tbody tr:hover{background:#eef4ff}td.cell{cursor:help}
 td.cell:focus{outline:2px solid var(--accent)}.interval{display:block;font-size:.72rem;color:var(--muted)}
+td.outside{color:var(--bad);font-weight:600}.table2 th{cursor:default}
 .notes{color:var(--muted);font-size:.8rem;max-width:80rem;overflow-wrap:anywhere}.shown{color:var(--muted);font-size:.8rem;margin:.2rem 0}
 .figures{display:flex;flex-wrap:wrap;gap:.6rem}figure{margin:0;max-width:420px}figure img{max-width:100%;border:1px solid var(--line)}
 figcaption{font-size:.78rem;color:var(--muted)}.placeholder{width:320px;height:200px;display:flex;align-items:center;justify-content:center;text-align:center;padding:1rem;border:2px dashed var(--bad);color:var(--bad);background:#fff5f5}

@@ -108,43 +108,56 @@ def side_by_side(records: Sequence[ResultRecord]) -> list[Row]:
     return rows
 
 
-def _mark(inside: bool | None) -> str:
-    return "n/a" if inside is None else ("yes" if inside else "**no**")
+TITLE = "Table II side by side: the paper's recall at 100 % precision against ours on real KITTI 00"
+
+INTRO = ("Real KITTI 00 top views (`bev-paper`), the authors' paper-era presets: `authors` "
+         "(BiGAN, Stable-AFL) and `authors-sad` (SAD); see `safl-bench list matchers`. "
+         "Ours: mean over the seeds [95 % interval over seeds and queries]; *inside*: "
+         "whether the paper's value lies in that interval. Two measures: ours (recall at "
+         "exactly 100 % precision over every query with a true place) and the authors' "
+         "reading (recall over the correctly matched queries at the first precision >= "
+         "0.99, `authors_recall_at_99p`). Table II does not say which it reports; the "
+         "authors' code reads the second.")
+
+
+def header() -> list[str]:
+    """The column titles, shared by the Markdown table and the site's page."""
+    out = ["Method", "Version", "Condition", "Paper", "Seeds"]
+    for _, title in MEASURES:
+        out += [title, "inside"]
+    return out
+
+
+def cells(row: Row) -> list[str]:
+    """One row's cells as text ('yes' / 'no' / 'n/a' for inside), in `header()`'s order."""
+    out = [PAPER_NAMES[row.method], row.version, row.condition, f"{row.paper:.1f}",
+           ",".join(map(str, row.seeds)) or "none"]
+    for measure, _ in MEASURES:
+        iv = row.ours.get(measure)
+        inside = row.inside(measure)
+        out += [iv.format(100.0) if iv is not None else "not run",
+                "n/a" if inside is None else ("yes" if inside else "no")]
+    return out
 
 
 def markdown(rows: Sequence[Row], level: int = 1) -> str:
     """The side-by-side table in Markdown, with how to read it; '' when there are no rows."""
     if not rows:
         return ""
-    head = "#" * level
-    lines = [f"{head} Table II side by side: the paper's recall at 100 % precision against ours "
-             "on real KITTI 00", "",
-             "Real KITTI 00 top views (`bev-paper`), the authors' paper-era presets: `authors` "
-             "(BiGAN, Stable-AFL) and `authors-sad` (SAD); see `safl-bench list matchers`. "
-             "Ours: mean over the seeds [95 % interval over seeds and queries]; *inside*: "
-             "whether the paper's value lies in that interval. Two measures: ours (recall at "
-             "exactly 100 % precision over every query with a true place) and the authors' "
-             "reading (recall over the correctly matched queries at the first precision >= "
-             "0.99, `authors_recall_at_99p`). Table II does not say which it reports; the "
-             "authors' code reads the second.", ""]
-    header = ["Method", "Version", "Condition", "Paper", "Seeds"]
-    for _, title in MEASURES:
-        header += [title, "inside"]
-    lines.append("| " + " | ".join(header) + " |")
-    lines.append("|" + "---|" * len(header))
+    lines = [f"{'#' * level} {TITLE}", "", INTRO, ""]
+    head = header()
+    lines.append("| " + " | ".join(head) + " |")
+    lines.append("|" + "---|" * len(head))
     for row in rows:
-        cells = [PAPER_NAMES[row.method], row.version, row.condition, f"{row.paper:.1f}",
-                 ",".join(map(str, row.seeds)) or "none"]
-        for measure, _ in MEASURES:
-            iv = row.ours.get(measure)
-            cells += [iv.format(100.0) if iv is not None else "not run", _mark(row.inside(measure))]
-        lines.append("| " + " | ".join(cells) + " |")
+        text = [f"**{c}**" if h == "inside" and c == "no" else c for h, c in zip(head, cells(row), strict=True)]
+        lines.append("| " + " | ".join(text) + " |")
     lines.append("")
-    lines.extend(_summary(rows))
+    lines.extend(summary(rows))
     return "\n".join(lines) + "\n"
 
 
-def _summary(rows: Sequence[Row]) -> list[str]:
+def summary(rows: Sequence[Row]) -> list[str]:
+    """How many cells hold the paper's value inside our interval, per measure."""
     out = []
     for measure, title in MEASURES:
         judged = [r for r in rows if r.inside(measure) is not None]
