@@ -257,7 +257,7 @@ def _table2_section(report: BuildReport, key: TableKey | None) -> str:
         "<tr>" + "".join(f'<td class="outside">{_e(c)}</td>' if h == "inside" and c == "no"
                          else f"<td>{_e(c)}</td>" for h, c in zip(table2.header(), table2.cells(row), strict=True))
         + "</tr>" for row in rows)
-    summary = "".join(f"<li>{_inline_code(line[2:])}</li>" for line in table2.summary(rows))
+    summary = "".join(f"<li>{_inline_code(line)}</li>" for line in table2.summary(rows))
     return (f'<section class="table2" id="table2-{_e(slugify(key.stem))}">'
             f"<h2>{_e(table2.TITLE)}</h2><p>{_inline_code(table2.INTRO)}</p>"
             f'<p class="meta"><a class="source-md" href="../{_e(md)}">Markdown</a> · '

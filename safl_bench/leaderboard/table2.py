@@ -152,7 +152,7 @@ def markdown(rows: Sequence[Row], level: int = 1) -> str:
         text = [f"**{c}**" if h == "inside" and c == "no" else c for h, c in zip(head, cells(row), strict=True)]
         lines.append("| " + " | ".join(text) + " |")
     lines.append("")
-    lines.extend(summary(rows))
+    lines.extend(f"- {line}" for line in summary(rows))
     return "\n".join(lines) + "\n"
 
 
@@ -162,7 +162,7 @@ def summary(rows: Sequence[Row]) -> list[str]:
     for measure, title in MEASURES:
         judged = [r for r in rows if r.inside(measure) is not None]
         inside = sum(1 for r in judged if r.inside(measure))
-        out.append(f"- {title}: the paper's value lies inside our interval in {inside} of "
+        out.append(f"{title}: the paper's value lies inside our interval in {inside} of "
                    f"{len(judged)} cells.")
     return out
 
