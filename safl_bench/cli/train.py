@@ -58,6 +58,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a constructor parameter (value parsed as JSON, else a string); repeatable")
     parser.add_argument("--out", help="output directory")
     parser.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    parser.add_argument("--snapshot-every", type=int, metavar="K",
+                        help="every K training steps also write the checkpoint (resumable there) and the "
+                             "encoder as snapshots/<method>-step<N>.safetensors: the checkpoints to draw "
+                             "the training-stability figure from (`safl-bench train-curve`)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     parser.add_argument("--device", help="torch device to train on, e.g. cuda (default cpu; only the CPU run is bit-reproducible)")
     parser.add_argument("--val-task", action="append", default=None, metavar="ID",
@@ -138,6 +142,8 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError(f"method {args.method!r} has nothing to train")
     if args.step < 1:
         raise ConfigError(f"--step must be >= 1, got {args.step}")
+    if args.snapshot_every is not None and args.snapshot_every < 1:
+        raise ConfigError(f"--snapshot-every must be >= 1 step, got {args.snapshot_every}")
     if args.threads is not None:
         if args.threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {args.threads}")
@@ -195,12 +201,24 @@ def main(args: argparse.Namespace) -> int:
         val_tasks = []
     callback = (validation_callback(val_tasks, source.label, args.kitti_root, progress, args.bev_root,
                                     args.bev_resolution) if val_tasks else None)
-    print(f"training {cls.name} on {len(maps)} maps of {source.label} {', '.join(sequences)} -> {out}", file=sys.stderr)
-    method.fit(maps, checkpoint_dir=out, callback=callback, progress=progress)
-
     from safl_bench.methods.training_data import TrainedOn
 
     trained_on = TrainedOn(source.kind, source.label, tuple(sequences), args.step).to_dict()
+    step_callback = None
+    if args.snapshot_every is not None:
+        every = args.snapshot_every
+
+        def step_callback(done: int, trained: AdversarialMethod) -> None:
+            if done % every == 0:
+                snapshot_dir = out / "snapshots"
+                snapshot_dir.mkdir(exist_ok=True)
+                trained.save(snapshot_dir / f"{cls.name}-step{done:06d}.safetensors", parts=("encoder",),
+                             trained_on={**trained_on, "steps": done})
+
+    print(f"training {cls.name}@{cls.version} on {len(maps)} maps of {source.label} {', '.join(sequences)} -> {out}",
+          file=sys.stderr)
+    method.fit(maps, checkpoint_dir=out, callback=callback, progress=progress,
+               checkpoint_every=args.snapshot_every, step_callback=step_callback)
     method.save(out / "model.safetensors", parts=("encoder", "decoder"), trained_on=trained_on)
     method.save(out / f"{cls.name}.safetensors", parts=("encoder",), trained_on=trained_on)
     save_reconstructions(method, maps, out / "reconstructions.png")

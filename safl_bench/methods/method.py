@@ -247,7 +247,9 @@ class Method:
             raise DataError(f"{path} does not hold a saved method (a training checkpoint? use its final weights)")
         target: type[Method] = cls
         if cls is Method:
-            target = method_class(info["name"])
+            saved = str(info.get("version") or "")
+            known = method_versions(str(info["name"]))
+            target = method_class(f"{info['name']}@{saved}" if saved in known else str(info["name"]))
         elif info["name"] != cls.name:
             raise DataError(f"{path} holds weights of method {info['name']!r}, not {cls.name!r}")
         params = dict(info.get("params", {}))
@@ -278,8 +280,8 @@ class Method:
 
 ENTRY_POINT_GROUP = "safl_bench.methods"
 BUILTIN_MODULES: tuple[str, ...] = (
-    "baselines.sad", "baselines.bigan", "methods.stable_afl", "baselines.scan_context", "baselines.m2dp",
-    "baselines.bevplace",
+    "baselines.sad", "baselines.bigan", "baselines.bigan_v2", "methods.stable_afl", "methods.stable_afl_v2",
+    "baselines.scan_context", "baselines.m2dp", "baselines.bevplace",
 )
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.\-]*$")
 
@@ -310,6 +312,9 @@ class MethodInfo:
         return doc.splitlines()[0] if doc else ""
 
 
+#: every registered version of every method: name -> version -> info
+_versions: dict[str, dict[str, MethodInfo]] = {}
+#: the newest version of each name: what a bare name means
 _registry: dict[str, MethodInfo] = {}
 _broken: dict[str, MethodInfo] = {}
 _discovered = False
@@ -343,15 +348,23 @@ def _validate_class(cls: Any, where: str) -> type[Method]:
     return cls
 
 
+def version_key(version: str) -> tuple[tuple[int, str], ...]:
+    """Sort key of a version string: dot-separated parts, numeric ones compared as numbers
+    ("10" after "9"), others as text after every number."""
+    return tuple((int(p), "") if p.isdigit() else (1 << 62, p) for p in version.split("."))
+
+
 def _add(cls: type[Method], via: str, distribution: str | None) -> None:
-    existing = _registry.get(cls.name)
+    versions = _versions.setdefault(cls.name, {})
+    existing = versions.get(cls.version)
     if existing is not None:
         if existing.cls is cls:
             return
         raise RegistryError(
-            f"method name {cls.name!r} is taken by {existing.origin}; cannot also register {cls.__module__}.{cls.__qualname__}"
+            f"method {cls.name!r} version {cls.version!r} is taken by {existing.origin}; cannot also "
+            f"register {cls.__module__}.{cls.__qualname__} (give it another `version`)"
         )
-    _registry[cls.name] = MethodInfo(
+    versions[cls.version] = MethodInfo(
         name=cls.name,
         version=cls.version,
         input_kind=cls.input_kind,
@@ -360,6 +373,7 @@ def _add(cls: type[Method], via: str, distribution: str | None) -> None:
         via=via,
         cls=cls,
     )
+    _registry[cls.name] = versions[max(versions, key=version_key)]
 
 
 def register_method(cls: type[Method]) -> type[Method]:
@@ -370,7 +384,19 @@ def register_method(cls: type[Method]) -> type[Method]:
 
 
 def unregister_method(name: str) -> None:
-    """Remove a registered method (for tests and interactive use); RegistryError if unknown."""
+    """Remove a registered method, every version of it, or one with ``name@version`` (for tests
+    and interactive use); RegistryError if unknown."""
+    base, _, version = name.partition("@")
+    if version:
+        if _versions.get(base, {}).pop(version, None) is None:
+            raise RegistryError(f"no method {name!r} is registered")
+        if _versions[base]:
+            _registry[base] = _versions[base][max(_versions[base], key=version_key)]
+        else:
+            del _versions[base]
+            del _registry[base]
+        return
+    _versions.pop(name, None)
     if _registry.pop(name, None) is None and _broken.pop(name, None) is None:
         raise RegistryError(f"no method {name!r} is registered")
 
@@ -405,27 +431,40 @@ def discover(refresh: bool = False) -> None:
     _load_entry_points()
 
 
-def list_methods(*, include_broken: bool = False) -> list[MethodInfo]:
-    """All registered methods, sorted by name (and failed plug-ins if `include_broken`)."""
+def list_methods(*, include_broken: bool = False, all_versions: bool = False) -> list[MethodInfo]:
+    """The registered methods, sorted by name: the newest version of each (every version, oldest
+    first, with `all_versions`), and failed plug-ins if `include_broken`."""
     discover()
-    infos = list(_registry.values())
+    if all_versions:
+        infos = [i for versions in _versions.values() for i in versions.values()]
+    else:
+        infos = list(_registry.values())
     if include_broken:
         infos += [b for name, b in _broken.items() if name not in _registry]
-    return sorted(infos, key=lambda i: i.name)
+    return sorted(infos, key=lambda i: (i.name, version_key(i.version)))
+
+
+def method_versions(name: str) -> list[str]:
+    """The registered versions of `name`, oldest first (empty when it is not registered)."""
+    discover()
+    return sorted(_versions.get(name.partition("@")[0], {}), key=version_key)
 
 
 def method_class(name: str) -> type[Method]:
-    """The class registered as `name` (or ``name@version``, which must be the registered
-    version: records name methods that way); RegistryError (with suggestions) when there is
-    none."""
+    """The class registered as `name` (its newest version) or ``name@version`` (that version:
+    records name methods that way); RegistryError (with suggestions) when there is none."""
     discover()
     name, _, version = name.partition("@")
     info = _registry.get(name)
     if info is not None and info.cls is not None:
-        if version and version != str(info.cls.version):
-            raise RegistryError(f"method {name!r} is version {info.cls.version} here, not "
-                                f"{version!r}; run `{name}` (its only registered version)")
-        return info.cls
+        if not version:
+            return info.cls
+        chosen = _versions[name].get(version)
+        if chosen is None or chosen.cls is None:
+            known = ", ".join(f"{name}@{v}" for v in method_versions(name))
+            raise RegistryError(f"method {name!r} has no version {version!r} here; registered: {known} "
+                                f"(a bare {name!r} is the newest)")
+        return chosen.cls
     if name in _broken:
         raise RegistryError(f"method {name!r} failed to load from {_broken[name].origin}: {_broken[name].error}")
     known = sorted(_registry)
@@ -441,17 +480,44 @@ def _ships_weights(cls: type[Method]) -> bool:
 
 
 def shipped_weights_path(cls: type[Method], source: str | None = None) -> Path | None:
-    """The weights file shipped beside the method's module: `weights/<name>-<source>.safetensors`
-    (trained on that kind of data, e.g. "bev": real KITTI top views) when `source` is given and
-    there is one, else `weights/<name>.safetensors` (the synthetic default's); None when the
-    method ships none (yet)."""
+    """The weights file shipped beside the method's module for this version of it:
+    `weights/<name>-v<version>-<source>.safetensors` (trained on that kind of data, e.g. "bev":
+    real KITTI top views) when `source` is given and there is one, else
+    `weights/<name>-v<version>.safetensors` (the synthetic default's). The unversioned names
+    `<name>-<source>` / `<name>` (the files of the first releases) count only when the version
+    saved in them is this class's, so one version never runs another's weights. None when this
+    version ships none (yet)."""
     module = sys.modules.get(cls.__module__)
     file = getattr(module, "__file__", None)
     if not (cls.trainable or _ships_weights(cls)) or file is None:
         return None
     folder = Path(file).parent / "weights"
-    names = ([f"{cls.name}-{source}.safetensors"] if source else []) + [f"{cls.name}.safetensors"]
-    return next((folder / n for n in names if (folder / n).is_file()), None)
+    kinds = ([f"-{source}"] if source else []) + [""]
+    for kind in kinds:
+        versioned = folder / f"{cls.name}-v{cls.version}{kind}.safetensors"
+        if versioned.is_file():
+            return versioned
+        legacy = folder / f"{cls.name}{kind}.safetensors"
+        if legacy.is_file() and _saved_version(legacy) == str(cls.version):
+            return legacy
+    return None
+
+
+def _saved_version(path: Path) -> str | None:
+    """The method version stored in a weights file's metadata (only the header is read)."""
+    import json
+
+    from safetensors import safe_open
+
+    from safl_bench.methods.weights import METADATA_KEY
+
+    try:
+        with safe_open(str(path), framework="pt", device="cpu") as fh:
+            meta = json.loads((fh.metadata() or {}).get(METADATA_KEY, "{}"))
+    except Exception:  # an unreadable file is reported when it is loaded
+        return None
+    info = meta.get("method") if isinstance(meta, dict) else None
+    return str(info.get("version")) if isinstance(info, dict) else None
 
 
 def make_method(name: str, *, weights: str | Path | None = None, source: str | None = None,

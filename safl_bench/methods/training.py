@@ -21,6 +21,14 @@ subclass adds; a subclass implements `build_networks`, `build_optimizers` and `t
 An epoch is one pass over the shuffled maps in batches (the last incomplete batch is dropped);
 a training step consumes `batches_per_step` batches (WGAN's critic iterations each take a
 fresh batch, as in Arjovsky et al.'s reference code).
+
+A method may count its training in steps instead of epochs (an `iterations` parameter, as the
+authors' code does): training then runs exactly that many steps, across epochs, and stops
+inside an epoch when the count says so. `checkpoint_every=K` also writes the checkpoint every K
+steps, with the state of both random streams, so a run interrupted inside an epoch resumes
+there and ends with the same weights; `step_callback(step, method)` runs after every step (the
+`train` command saves the encoder every K steps with it: the checkpoints the paper's Figure 14
+is drawn from).
 """
 
 from __future__ import annotations
@@ -53,6 +61,7 @@ CHECKPOINT = "last.safetensors"
 LOG = "log.jsonl"
 
 Callback = Callable[[int, "AdversarialMethod"], dict[str, Any] | None]
+StepCallback = Callable[[int, "AdversarialMethod"], None]
 
 
 def epoch_seed(seed: int, epoch: int) -> int:
@@ -91,6 +100,8 @@ class AdversarialMethod(Method):
     prior: str
     describe_batch: int
     device: str
+    #: training length in steps, for methods that count it so (None: `epochs` epochs)
+    iterations: int | None = None
 
     # -- to implement --------------------------------------------------------------------------
     def build_networks(self) -> dict[str, nn.Module]:
@@ -113,7 +124,8 @@ class AdversarialMethod(Method):
     def _init_networks(self) -> None:
         if self.prior not in ("uniform", "normal"):
             raise ConfigError(f"{self.name}: prior must be 'uniform' or 'normal', got {self.prior!r}")
-        for key in ("code_size", "width", "encoder_width", "epochs", "batch_size", "describe_batch"):
+        counted = ("iterations",) if self.iterations is not None else ("epochs",)
+        for key in ("code_size", "width", "encoder_width", *counted, "batch_size", "describe_batch"):
             value = getattr(self, key)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ConfigError(f"{self.name}: {key} must be a positive integer, got {value!r}")
@@ -214,32 +226,41 @@ class AdversarialMethod(Method):
         checkpoint_dir: str | Path | None = None,
         callback: Callback | None = None,
         progress: bool = False,
+        checkpoint_every: int | None = None,
+        step_callback: StepCallback | None = None,
     ) -> Self:
         """Train from scratch (or resume from `checkpoint_dir`); see the module docstring.
 
         `epochs`, `batch_size` and `seed` default to the constructor's values and, when given,
         replace them (so `config()` and saved weights record what was actually run)."""
         self.set_params(**{k: v for k, v in (("epochs", epochs), ("batch_size", batch_size), ("seed", seed)) if v is not None})
-        train(self, maps, checkpoint_dir=checkpoint_dir, callback=callback, progress=progress)
+        train(self, maps, checkpoint_dir=checkpoint_dir, callback=callback, progress=progress,
+              checkpoint_every=checkpoint_every, step_callback=step_callback)
         return self
 
 
 def _checkpoint_key(method: AdversarialMethod, data_fp: str) -> dict[str, Any]:
-    params = {k: v for k, v in method.get_params().items() if k not in ("epochs", *method.runtime_params)}
+    params = {k: v for k, v in method.get_params().items()
+              if k not in ("epochs", "iterations", *method.runtime_params)}
     return {"name": method.name, "version": method.version, "params": params, "data": data_fp}
 
 
-def save_checkpoint(method: AdversarialMethod, directory: Path, epoch: int, key: dict[str, Any]) -> None:
-    """Write every network and optimizer state after `epoch` completed epochs (atomic)."""
+def save_checkpoint(method: AdversarialMethod, directory: Path, epoch: int, key: dict[str, Any],
+                    step: int = 0, rng: dict[str, torch.Tensor] | None = None) -> None:
+    """Write every network and optimizer state after `epoch` completed epochs and `step` steps
+    of the next one (atomic); `rng` holds the random streams' states when `step` > 0."""
     assert method.optims is not None
     tensors = module_tensors(method.nets)
     opt_tensors, opt_scalars = optimizer_tensors(method.optims)
     tensors.update(opt_tensors)
-    save_tensors(directory / CHECKPOINT, tensors, {"kind": "checkpoint", "epoch": epoch, "key": key, "optimizers": opt_scalars})
+    tensors.update({f"rng/{k}": v for k, v in (rng or {}).items()})
+    save_tensors(directory / CHECKPOINT, tensors, {"kind": "checkpoint", "epoch": epoch, "step": step,
+                                                   "key": key, "optimizers": opt_scalars})
 
 
-def load_checkpoint(method: AdversarialMethod, directory: Path, key: dict[str, Any]) -> int:
-    """Restore networks and optimizers from `directory`; returns the completed epochs."""
+def load_checkpoint(method: AdversarialMethod, directory: Path, key: dict[str, Any]) -> tuple[int, int, dict[str, torch.Tensor]]:
+    """Restore networks and optimizers from `directory`; returns the completed epochs, the
+    steps done in the next one and the random streams' states saved with them."""
     path = directory / CHECKPOINT
     tensors, meta = load_tensors(path)
     if meta.get("kind") != "checkpoint":
@@ -250,9 +271,10 @@ def load_checkpoint(method: AdversarialMethod, directory: Path, key: dict[str, A
             f"({meta.get('key')} vs {key}); use another output directory or remove it"
         )
     assert method.optims is not None
+    rng = {k.removeprefix("rng/"): tensors.pop(k) for k in [k for k in tensors if k.startswith("rng/")]}
     load_module_tensors(method.nets, tensors, source=path)
     load_optimizer_tensors(method.optims, tensors, meta["optimizers"], source=path)
-    return int(meta["epoch"])
+    return int(meta["epoch"]), int(meta.get("step", 0)), rng
 
 
 def read_log(directory: Path, upto: int) -> list[dict[str, Any]]:
@@ -275,6 +297,8 @@ def train(
     checkpoint_dir: str | Path | None = None,
     callback: Callback | None = None,
     progress: bool = False,
+    checkpoint_every: int | None = None,
+    step_callback: StepCallback | None = None,
 ) -> list[dict[str, Any]]:
     """The training loop behind `AdversarialMethod.fit`; returns the per-epoch log."""
     x_all = method.to_input(maps)
@@ -285,51 +309,77 @@ def train(
             f"{method.name}: {n} training maps are too few for batch_size={batch} with {k} "
             f"batch(es) per step; need at least {batch * k}"
         )
+    if checkpoint_every is not None and checkpoint_every < 1:
+        raise ConfigError(f"checkpoint_every must be a positive number of steps, got {checkpoint_every!r}")
     directory = Path(checkpoint_dir) if checkpoint_dir is not None else None
     key = _checkpoint_key(method, data_fingerprint(x_all.numpy()))
+    total = method.iterations if method.iterations is not None else method.epochs * steps
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(method.seed))
         method.nets = method._on_device(method.build_networks())
         method.optims = method.build_optimizers()
         method._loaded_parts = tuple(method.nets)
-        done, log = 0, []
+        done, done_steps, rng, log = 0, 0, {}, []
         if directory is not None and (directory / CHECKPOINT).is_file():
-            done = load_checkpoint(method, directory, key)
+            done, done_steps, rng = load_checkpoint(method, directory, key)
             log = read_log(directory, done)
 
         bar = None
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=(method.epochs - min(done, method.epochs)) * steps, desc=f"train {method.name}", unit="step")
-        for epoch in range(done, method.epochs):
+            bar = tqdm(total=max(total - done * steps - done_steps, 0), desc=f"train {method.name}", unit="step")
+        epoch = done
+        while epoch * steps < total:
             started = time.perf_counter()
             gen = torch.Generator().manual_seed(epoch_seed(method.seed, epoch))
             torch.manual_seed(epoch_seed(method.seed, epoch) ^ 0x5EED)
             for net in method.nets.values():
                 net.train()
             order = torch.randperm(n, generator=gen)
+            first, done_steps = done_steps, 0
+            if first:  # resuming inside this epoch: the streams continue where they were
+                gen.set_state(rng["gen"])
+                torch.set_rng_state(rng["torch"])
+            last = min(steps, total - epoch * steps)
             sums: dict[str, float] = {}
-            for s in range(steps):
+            for s in range(first, last):
                 batches = [x_all[order[(s * k + j) * batch : (s * k + j + 1) * batch]].to(method._device)
                            for j in range(k)]
                 for name, value in method.train_step(batches, gen).items():
                     sums[name] = sums.get(name, 0.0) + float(value)
+                done_now = epoch * steps + s + 1
+                if step_callback is not None:
+                    step_callback(done_now, method)
+                if (directory is not None and checkpoint_every is not None and s + 1 < last
+                        and done_now % checkpoint_every == 0):
+                    save_checkpoint(method, directory, epoch, key, step=s + 1,
+                                    rng={"gen": gen.get_state(), "torch": torch.get_rng_state()})
                 if bar is not None:
                     bar.update(1)
-                    bar.set_postfix({name: f"{v / (s + 1):.3g}" for name, v in list(sums.items())[:3]})
+                    bar.set_postfix({name: f"{v / (s + 1 - first):.3g}" for name, v in list(sums.items())[:3]})
             for net in method.nets.values():
                 net.eval()
-            record: dict[str, Any] = {"epoch": epoch + 1, "steps": steps}
-            record.update({name: v / steps for name, v in sums.items()})
+            ran = last - first
+            record: dict[str, Any] = {"epoch": epoch + 1, "steps": last}
+            record.update({name: v / max(ran, 1) for name, v in sums.items()})
             record["seconds"] = round(time.perf_counter() - started, 3)
+            if first:
+                record["resumed_at_step"] = first
             if callback is not None:
                 record.update(callback(epoch + 1, method) or {})
             log.append(record)
             if directory is not None:
-                save_checkpoint(method, directory, epoch + 1, key)
+                if last == steps:
+                    save_checkpoint(method, directory, epoch + 1, key)
+                else:  # the run ends inside this epoch
+                    save_checkpoint(method, directory, epoch, key, step=last,
+                                    rng={"gen": gen.get_state(), "torch": torch.get_rng_state()})
                 write_log(directory, log)
+            if last < steps:
+                break
+            epoch += 1
         if bar is not None:
             bar.close()
     for net in method.nets.values():
