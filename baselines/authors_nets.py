@@ -99,7 +99,8 @@ class _Trunk(nn.Module):
         self.test_stats = test_stats
         channels = [1] + [width * 2**i for i in range(_levels(image_size))]
         self.convs = nn.ModuleList(_SameConv(a, b) for a, b in itertools.pairwise(channels))
-        self.norms = nn.ModuleList(nn.BatchNorm2d(c, eps=BN_EPS) for c in channels[1:])
+        self.norms: list[nn.BatchNorm2d] = nn.ModuleList(  # type: ignore[assignment]
+            nn.BatchNorm2d(c, eps=BN_EPS) for c in channels[1:])
         self.channels = channels[-1]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:

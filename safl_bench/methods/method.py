@@ -461,8 +461,8 @@ def method_class(name: str) -> type[Method]:
             return info.cls
         chosen = _versions[name].get(version)
         if chosen is None or chosen.cls is None:
-            known = ", ".join(f"{name}@{v}" for v in method_versions(name))
-            raise RegistryError(f"method {name!r} has no version {version!r} here; registered: {known} "
+            versions = ", ".join(f"{name}@{v}" for v in method_versions(name))
+            raise RegistryError(f"method {name!r} has no version {version!r} here; registered: {versions} "
                                 f"(a bare {name!r} is the newest)")
         return chosen.cls
     if name in _broken:

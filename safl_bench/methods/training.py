@@ -320,7 +320,9 @@ def train(
         method.nets = method._on_device(method.build_networks())
         method.optims = method.build_optimizers()
         method._loaded_parts = tuple(method.nets)
-        done, done_steps, rng, log = 0, 0, {}, []
+        done, done_steps = 0, 0
+        rng: dict[str, torch.Tensor] = {}
+        log: list[dict[str, Any]] = []
         if directory is not None and (directory / CHECKPOINT).is_file():
             done, done_steps, rng = load_checkpoint(method, directory, key)
             log = read_log(directory, done)
