@@ -232,8 +232,9 @@ def training_figure(logs: Sequence[TrainingLog], source: str, path: Path) -> Non
                     label=condition,
                     **_condition_style(condition, index),
                 )
-            ax.set_xlabel("epoch")
-            ax.set_ylabel("validation ROC AUC")
+            ax.set_xlabel("training iteration" if log.unit == "iteration" else "epoch")
+            ax.set_ylabel(f"ROC AUC on {log.measured_on}" if log.measured_on else "validation ROC AUC",
+                          fontsize=8 if log.measured_on else None)
             ax.set_title(log.method, fontsize=9)
             ax.grid(True, linewidth=0.3)
             ax.legend(fontsize=7, ncols=2, loc="lower right")

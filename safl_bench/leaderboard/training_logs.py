@@ -5,6 +5,10 @@
     {"epoch": 3, "losses": {...}, "val_auc": {"T1R1": 0.81, ...}, "source": "synthetic default (seed 0)"}
 
 "source" (the data source's label) is optional; figures say "source not recorded" without it.
+A log may count training steps instead of epochs: lines with "iteration" in place of "epoch"
+(`safl-bench train-curve`, from a run's snapshots), and "measured_on" naming what the AUC was
+measured on when that is not a validation sequence (e.g. the test sequence); one file holds one
+kind of line.
 A line that is not such an object is reported by file and line and skipped; when an epoch
 appears more than once (a resumed run), its last line wins.
 """
@@ -30,8 +34,10 @@ class TrainingLog:
     method: str
     path: Path
     source: str | None
-    epochs: list[int]
+    epochs: list[int]  # the x values: epochs, or training steps when unit == "iteration"
     val_auc: dict[str, list[float | None]]  # condition -> value per epoch (None: not measured)
+    unit: str = "epoch"
+    measured_on: str | None = None  # what the AUC was measured on, when not validation data
 
 
 def load_training_logs(root: str | os.PathLike[str]) -> tuple[list[TrainingLog], list[Problem]]:
@@ -54,6 +60,8 @@ def read_training_log(path: Path) -> tuple[TrainingLog | None, list[Problem]]:
     problems: list[Problem] = []
     by_epoch: dict[int, dict[str, float]] = {}
     sources: set[str] = set()
+    units: set[str] = set()
+    measured: set[str] = set()
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
@@ -62,11 +70,15 @@ def read_training_log(path: Path) -> tuple[TrainingLog | None, list[Problem]]:
         if not line.strip():
             continue
         try:
-            epoch, aucs, source = _parse_line(json.loads(line))
+            data = json.loads(line)
+            epoch, aucs, source = _parse_line(data)
         except (json.JSONDecodeError, ValueError) as exc:
             problems.append(Problem(path, f"line {number}: {exc}"))
             continue
         by_epoch[epoch] = aucs
+        units.add("iteration" if "iteration" in data else "epoch")
+        if isinstance(data.get("measured_on"), str):
+            measured.add(data["measured_on"])
         if source:
             sources.add(source)
     if not by_epoch:
@@ -74,19 +86,24 @@ def read_training_log(path: Path) -> tuple[TrainingLog | None, list[Problem]]:
     if len(sources) > 1:
         problems.append(Problem(path, f"mixes data sources {sorted(sources)}; not plotted"))
         return None, problems
+    if len(units) > 1:
+        problems.append(Problem(path, "mixes epoch and iteration lines; not plotted"))
+        return None, problems
     epochs = sorted(by_epoch)
     conditions = sorted({c for aucs in by_epoch.values() for c in aucs})
     val_auc = {c: [by_epoch[e].get(c) for e in epochs] for c in conditions}
     source = next(iter(sources)) if sources else None
-    return TrainingLog(path.parent.name, path, source, epochs, val_auc), problems
+    return TrainingLog(path.parent.name, path, source, epochs, val_auc, units.pop(),
+                       " / ".join(sorted(measured)) or None), problems
 
 
 def _parse_line(data: Any) -> tuple[int, dict[str, float], str | None]:
     if not isinstance(data, dict):
         raise ValueError("not a JSON object")
-    epoch = data.get("epoch")
+    key = "iteration" if "iteration" in data and "epoch" not in data else "epoch"
+    epoch = data.get(key)
     if isinstance(epoch, bool) or not isinstance(epoch, int) or epoch < 0:
-        raise ValueError(f"'epoch' must be an integer >= 0, got {epoch!r}")
+        raise ValueError(f"'{key}' must be an integer >= 0, got {epoch!r}")
     raw = data.get("val_auc")
     if not isinstance(raw, dict):
         raise ValueError("'val_auc' must be an object of condition -> AUC")
