@@ -4,41 +4,50 @@
 Every value below is read from that file (lines at 25be0fd) and `parameters.py` there:
 
 * `AuthorsEncoder` (`encoder`, module.py:156-190): four 5x5 stride-2 'SAME' convolutions with
-  `img_filter` = 64 base channels (parameters.py:42), 64-128-256-512, each followed by batch norm
+  `img_filter` = 64 base channels (parameters.py:40), 64-128-256-512, each followed by batch norm
   and LeakyReLU(0.2) (the first one too), flattened (4x4x512 for 64x64 maps) and a linear layer to
   the `code_dim` = 512-d code (parameters.py:22), no activation.
 * `AuthorsDecoder` (`decoder`, :116-153): linear code -> 4x4x512, batch norm + ReLU, then 5x5
   stride-2 transposed convolutions 256-128-64 with batch norm + ReLU and a last one to the image,
   tanh.
 * `AuthorsImageCritic` (`discriminator_X`, :231-269): the encoder's convolution trunk, then a
-  linear layer to `dX_dim` = 1024 outputs (parameters.py:43) with batch norm and LeakyReLU(0.2):
+  linear layer to `dX_dim` = 1024 outputs (parameters.py:41) with batch norm and LeakyReLU(0.2):
   the critic's output is that 1024-d vector (its least-squares loss averages over it).
 * `AuthorsJointCritic` (`discriminator_J`, :297-365): the same image trunk to 1024; a code path
-  of dropout, linear 1024, dropout, linear 1024 (no activations); the two concatenated, then
+  of dropout, linear 1024, dropout, linear 1024 (`dZ_dim`, parameters.py:42; no activations);
+  the two concatenated, then
   dropout, linear 2048 + LeakyReLU(0.2), dropout, linear 2048 + LeakyReLU(0.2), dropout, linear 1
-  + LeakyReLU(0.2) (`dJ_dim` = 2048, parameters.py:45). Dropout keeps 0.8 (`keep=0.8`), and is on
-  in every training step (model.py:174-176 feeds `all_drop`).
+  + LeakyReLU(0.2) (`dJ_dim` = 2048, parameters.py:43). Dropout keeps 0.8 (`keep=0.8`,
+  module.py:336-359), and is on in every training step (`feed_datas`, model.py:174-181, feeds
+  `all_drop` for both methods).
 
 Padding: TensorFlow's 'SAME' for a 5x5 stride-2 convolution of an even size pads 1 before and 2
 after; the transposed convolution is its adjoint, which crops 1 before and 2 after. Both are
 written so here (`_same_conv`, `_same_deconv`), not as PyTorch's symmetric padding, which would
 shift every feature map by half a pixel against theirs.
 
-Initialisation (module.py `w_init`, `gamma_init`): weights N(0, 0.02), biases 0 (tensorlayer's
-default `b_init`), batch-norm scale N(1, 0.02), shift 0; batch-norm epsilon 1e-5 (tensorlayer's
-`BatchNormLayer` default).
+Initialisation (module.py `w_init`, `gamma_init`, e.g. :158-159): weights N(0, 0.02), biases 0
+(tensorlayer's default `b_init`), batch-norm scale N(1, 0.02), shift 0; batch-norm epsilon 1e-5
+(tensorlayer's `BatchNormLayer` default).
+
+Depth: at the authors' 64x64 (`output_size`, parameters.py:21) the networks have their four
+stride-2 levels; another `image_size` (a power of two, e.g. the tests' 16) gets as many levels as
+reach 4x4, so it is a smaller network of the same design, not theirs.
 
 Batch norm at test time: the authors' test graph is the training graph (`is_train=True`,
-model.py:67) fed one map at a time (model.py:364-373), so each map is normalised with its own
+model.py:67) fed one map at a time (model.py:364-373, with `batch_size` 1: the placeholder of
+model.py:62-63 has that size), so each map is normalised with its own
 statistics over its feature map, never with running averages. `test_stats="image"` (the
 default) does that for a whole batch at once (instance normalisation with the batch norm's scale
 and shift: the same numbers as batch 1); `test_stats="running"` uses the running averages, the
 usual inference of batch norm.
 
-One deviation: their maps are read as 3-channel JPEGs (`img_dim` = 3, parameters.py:21) of grey
-top views; ours are one channel. A 3-channel copy of a grey map through a first convolution is a
-1-channel convolution with the three kernels summed, so the networks are the same function
-class; only the first layer's initial scale differs (sqrt(3)).
+One deviation: their maps are read as 3-channel JPEGs (`img_dim` = 3, parameters.py:20;
+`is_grayscale=0`, model.py:364-365, src/data/__init__.py:21-22) of grey top views; ours are one
+channel. A 3-channel copy of a grey map through a first convolution is a 1-channel convolution
+with the three kernels summed, so the encoder and the critics are the same function class; only
+their first layer's initial scale differs (sqrt(3)). The decoder's last layer writes one channel
+where theirs writes three (module.py:148-149), which could also draw colour.
 """
 
 from __future__ import annotations

@@ -2,14 +2,15 @@
 
 `bigan@1` (baselines/bigan.py) follows Donahue et al.'s paper. Version 2 is the run the authors
 scored as "BiGAN" in the paper's figures: CNN-GAN/Top-Mapping at commit 25be0fd,
-`src/plot/plotPaper2.py:17,25,30` (`ALI/ALI`, checkpoint 22, i.e. 2200 iterations), method `ALI`
-of `src/model/model.py`:
+`src/plot/plotPaper2.py:17,25,28,30` (`ALI/ALI`, checkpoint 22, i.e. 2200 iterations: tested
+as `net_en_%d00`, model.py:489-492), method `ALI` of `src/model/model.py`:
 
 * the networks of `baselines/authors_nets.py` (encoder, decoder, joint critic), no side critics
   and no cycle loss (model.py:127-129 defines only the joint losses for it);
 * least-squares joint losses (model.py:128-129, `mae_criterion` = mean squared error);
 * one iteration (model.py:308-312): one joint-critic step, then `g_iter` = 8 joint-generator
-  steps on the same batch of 64 maps and 64 codes z ~ N(0, I); Adam lr 2e-4, beta1 0.5 for both
+  steps on the same batch of 64 maps and 64 codes z ~ N(0, I) (one `feed_datas`, :309, which
+  turns the joint critic's dropout on, :179-181); Adam lr 2e-4, beta1 0.5 for both
   (model.py:219-222).
 
 `iterations` defaults to 2200, the checkpoint their figures use (plotPaper2.py:25); the other

@@ -3,8 +3,9 @@
 `stable_afl@1` (methods/stable_afl.py) is built from the paper's text. Version 2 follows the code
 that trained the Stable-AFL features of the paper's figures, CNN-GAN/Top-Mapping at commit
 25be0fd (2017-10-17; `src/plot/plotPaper2.py:20,26` names that run `ALI_CLC/r14_Cout_0.1_X_LS`
-and its checkpoint 49, i.e. 4900 iterations), method `ALI_CLC` (`parameters.py:33`) with
-`Loss` = `LSGAN` (:35). Lines below are of `src/model/model.py` at 25be0fd unless named.
+and its checkpoint 49, i.e. 4900 iterations), method `ALI_CLC` (`parameters.py:34`) with
+`Loss` = `LSGAN` (:36; the flag is read by no code: model.py:42-43 fixes both losses to
+`mae_criterion`). Lines below are of `src/model/model.py` at 25be0fd unless named.
 
 Networks: `baselines/authors_nets.py` (64-128-256-512 5x5 convolutions with batch norm, a
 512-d code, the 1024-d image critic and the dropout joint critic of `src/module/module.py`).
@@ -13,23 +14,27 @@ Losses, all least squares (`mae_criterion` is the mean squared error, module.py:
 
 * joint critic (:92): 0.5 [(D_J(x, En(x)) - 1)^2 + D_J(De(z), z)^2], on D_J;
 * joint generator (:93): the labels swapped, on En and De (`var_gen`, :162-163);
-* cycle (:89-90): `cycle` = 0.1 (parameters.py:15) x [MSE(x, De(En(x))) + MSE(z, En(De(z)))],
+* cycle (:89-90): `cycle` = 0.1 (parameters.py:14) x [MSE(x, De(En(x))) + MSE(z, En(De(z)))],
   per-element means, on En and De with an Adam of its own (:191-192);
-* image side critic (:98-99): `side_D` = 0.1 (parameters.py:14) x 0.5 [(D_X(x) - 1)^2 +
-  D_X(De(z))^2] over D_X's 1024 outputs; decoder side loss (:96) 0.1 x (D_X(De(z)) - 1)^2 on De
-  alone;
-* the code-side critic D_Z and the encoder's side loss are built (:95, :100-101) but never
-  stepped in the loop (:303 is commented out), so they are not trained here either; no weight
-  clipping is run (:266 commented out).
+* image side critic (:98-99, on D_X, :203-204): `side_D` = 0.1 (parameters.py:13) x 0.5
+  [(D_X(x) - 1)^2 + D_X(De(z))^2] over D_X's 1024 outputs; decoder side loss (:96)
+  0.1 x (D_X(De(z)) - 1)^2 on De alone (:201-202);
+* the code-side critic D_Z and the encoder's side loss are built (:95, :100-101; optimisers
+  :199-200, :205-206) but never stepped: the loop (:263-274) runs neither, and the lines that
+  would (:300, :303) sit in a disabled block (:288-307), so they are not trained here either; no
+  weight clipping is run (the clip ops of :165-168 are never run; :266 is commented out).
 
-One iteration (:263-274), on ONE batch of `batch_size` = 64 maps and 64 codes z ~ N(0, I)
-(`NoiseSampler`, src/data/__init__.py:38-45; `sample_size` = 64): one joint-critic step; then
-`g_iter` = 8 times (parameters.py:48) a joint-generator step and a cycle step; then one image-side
-critic step and one decoder side step. Every network has its own Adam, lr 2e-4, beta1 0.5
-(parameters.py:12-13; :191-206). Batches: the maps shuffled, taken in order, reshuffled when
+One iteration (:263-274), on ONE batch of `batch_size` = 64 maps (parameters.py:46) and 64
+codes z ~ N(0, I) (`NoiseSampler`, src/data/__init__.py:38-45; `sample_size` = 64,
+parameters.py:19), drawn once (:265) and fed to every step of the iteration: one joint-critic
+step; then `g_iter` = 8 times (parameters.py:48) a joint-generator step and a cycle step; then
+one image-side critic step and one decoder side step. Every loss has its own Adam, lr 2e-4,
+beta1 0.5 (parameters.py:11-12; :191-206): the joint-generator and the cycle losses step the
+same En and De with two optimisers. Batches: the maps shuffled, taken in order, reshuffled when
 fewer than a batch remain (`DataSampler`, src/data/__init__.py:5-34): our epochs.
-`iterations` = 4900 (plotPaper2.py:26, checkpoint 49 of `save_step`-spaced saves, tested as
-`%d00`, model.py:338, :463-465). Training data: KITTI 01-08, every frame (:240-247).
+`iterations` = 4900 (plotPaper2.py:26: checkpoint 49; the weights are saved every `save_step` =
+50 iterations under the iteration count, parameters.py:39, :322-323, :514-515, and tested as
+`%d00`, :338, :462-465). Training data: KITTI 01-08, every frame (:240-247).
 
 Where the paper says otherwise, its value is a parameter: `code_size` (the paper's §IV.D
 descriptor is 1024 floats; the code 512), `prior` ("normal" here; "uniform" is BiGAN's).
