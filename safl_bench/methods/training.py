@@ -326,6 +326,10 @@ def train(
         if directory is not None and (directory / CHECKPOINT).is_file():
             done, done_steps, rng = load_checkpoint(method, directory, key)
             log = read_log(directory, done)
+            if done * steps + done_steps > total:
+                raise ConfigError(
+                    f"the checkpoint in {directory} holds {done * steps + done_steps} training steps, more "
+                    f"than the {total} asked for; ask for at least that many or use another output directory")
 
         bar = None
         if progress:
