@@ -236,8 +236,9 @@ class Method:
     def load(cls, path: str | Path, **overrides: Any) -> Method:
         """Build a method from a file written by `save` (safetensors only; no code runs).
 
-        Called on a subclass, the file must be that method's; called on `Method`, the class is
-        found in the registry by the name stored in the file. `overrides` may change only
+        Called on a subclass, the file must be that method's and that version's; called on
+        `Method`, the class is found in the registry by the name and version stored in the file
+        (the newest version when the saved one is not registered). `overrides` may change only
         `runtime_params` (parameters that do not change the outputs)."""
         from safl_bench.methods.weights import file_sha256, load_tensors
 
@@ -252,6 +253,11 @@ class Method:
             target = method_class(f"{info['name']}@{saved}" if saved in known else str(info["name"]))
         elif info["name"] != cls.name:
             raise DataError(f"{path} holds weights of method {info['name']!r}, not {cls.name!r}")
+        elif info.get("version") and str(info["version"]) != str(cls.version):
+            # one version never runs another's weights (their networks and outputs differ)
+            raise DataError(f"{path} holds weights of {cls.name}@{info['version']}, not of "
+                            f"{cls.name}@{cls.version}; select that version: --method "
+                            f"{cls.name}@{info['version']}")
         params = dict(info.get("params", {}))
         for key, value in overrides.items():
             if key in params and params[key] != value and key not in target.runtime_params:
@@ -471,6 +477,14 @@ def method_class(name: str) -> type[Method]:
     close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
     hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
     raise RegistryError(f"unknown method {name!r}{hint} (known: {', '.join(known) or 'none'})")
+
+
+def method_selector(name: str, version: str) -> str:
+    """What a command takes to select `name` at `version`: the bare name when that is the
+    newest registered version (what a bare name means), else ``name@version``; commands printed
+    for a record (explain, run) use it so that they pick the record's version."""
+    versions = method_versions(name)
+    return name if versions and versions[-1] == str(version) else f"{name}@{version}"
 
 
 def _ships_weights(cls: type[Method]) -> bool:
