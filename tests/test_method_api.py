@@ -134,7 +134,9 @@ def test_points_views_are_generated_for_point_methods():
 def test_builtins_are_listed_with_their_origin(capsys):
     infos = {i.name: i for i in reg.list_methods()}
     assert {"sad", "bigan", "stable_afl"} <= set(infos)
-    assert infos["stable_afl"].module == "methods.stable_afl"
+    assert infos["stable_afl"].module == "methods.stable_afl_v2"  # a bare name: the newest version
+    every = {(i.name, i.version): i for i in reg.list_methods(all_versions=True)}
+    assert every[("stable_afl", "1")].module == "methods.stable_afl"
     assert "safl-bench" in infos["sad"].origin
     assert cli_main(["list", "methods"]) == 0
     out = capsys.readouterr().out
@@ -198,25 +200,27 @@ def _tiny_stable(**kw):
 def test_make_method_weights_choices(monkeypatch, tmp_path):
     monkeypatch.setattr(reg, "shipped_weights_path", lambda cls, source=None: None)
     with pytest.warns(UserWarning, match="UNTRAINED"):
-        m = reg.make_method("stable_afl", width=4, encoder_width=4, code_size=16, hidden=16)
+        m = reg.make_method("stable_afl@1", width=4, encoder_width=4, code_size=16, hidden=16)
     assert m.config()["weights"]["source"] == "untrained"
     with pytest.raises(ConfigError, match="no shipped weights"):
-        reg.make_method("stable_afl", weights="shipped")
-    m = reg.make_method("stable_afl", weights="untrained", width=4, encoder_width=4, code_size=16, hidden=16, seed=3)
+        reg.make_method("stable_afl@1", weights="shipped")
+    m = reg.make_method("stable_afl@1", weights="untrained", width=4, encoder_width=4, code_size=16, hidden=16, seed=3)
     assert m.weights_info == {"source": "untrained", "seed": 3}
 
     path = _tiny_stable(seed=5).save(tmp_path / "stable_afl.safetensors", parts=("encoder",))
     monkeypatch.setattr(reg, "shipped_weights_path", lambda cls, source=None: path)
-    shipped = reg.make_method("stable_afl")
+    shipped = reg.make_method("stable_afl@1")
     assert shipped.weights_info["source"] == "shipped" and len(shipped.weights_info["sha256"]) == 64
     assert shipped.weights_info["path"] == f"methods/weights/{path.name}"
     assert shipped.seed == 5 and shipped.code_size == 16  # parameters come from the file
     maps = sample_views("topview", n=4)
     np.testing.assert_array_equal(shipped.describe(maps), _tiny_stable(seed=5).describe(maps))
-    from_path = reg.make_method("stable_afl", weights=str(path), describe_batch=2)  # runtime param
+    from_path = reg.make_method("stable_afl@1", weights=str(path), describe_batch=2)  # runtime param
     np.testing.assert_allclose(from_path.describe(maps), shipped.describe(maps), rtol=1e-4, atol=1e-9)
     with pytest.raises(ConfigError, match="conflicts with the weights"):
-        reg.make_method("stable_afl", weights=str(path), code_size=32)
+        reg.make_method("stable_afl@1", weights=str(path), code_size=32)
+    with pytest.raises(DataError, match=r"weights of stable_afl@1, not of stable_afl@2; .*--method stable_afl@1"):
+        reg.make_method("stable_afl", weights=str(path))  # a bare name is version 2: not these weights
 
 
 def test_method_load_dispatches_on_the_stored_name(tmp_path):

@@ -176,7 +176,7 @@ def test_train_command(tmp_path, monkeypatch, capsys, tiny_val_task):
     monkeypatch.setattr(train_cli, "load_training_maps", lambda *a, **k: (maps, {"01": 12}))
     monkeypatch.setattr("safl_bench.sources.synth_source", lambda *a, **k: _FakeSource())
     out = tmp_path / "run"
-    argv = ["train", "--method", "stable_afl", "--epochs", "1", "--batch-size", "2", "--out", str(out),
+    argv = ["train", "--method", "stable_afl@1", "--epochs", "1", "--batch-size", "2", "--out", str(out),
             "--no-progress", "--set", "width=4", "--set", "encoder_width=4", "--set", "code_size=16", "--set", "hidden=16",
             "--set", "critic_steps=2", "--val-task", tiny_val_task]
     assert main(argv) == 0
@@ -194,7 +194,7 @@ def test_train_command(tmp_path, monkeypatch, capsys, tiny_val_task):
     record = json.loads((out / "train.json").read_text())
     assert record["method"]["params"]["epochs"] == 2 and record["data"]["maps"] == 12
     loaded = Method.load(out / "stable_afl.safetensors")
-    assert loaded.describe(maps).shape == (12, 16)
+    assert loaded.version == "1" and loaded.describe(maps).shape == (12, 16)  # the saved version
     assert main(["train", "--method", "sad"]) == 2
     assert main(["train", "--method", "bigan", "--set", "nope=1"]) == 2
 

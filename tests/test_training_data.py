@@ -44,7 +44,7 @@ def test_seen_on_the_trained_sequence_of_the_same_data_only() -> None:
 
 
 def test_weights_record_what_they_were_trained_on(tmp_path) -> None:
-    method = make_method("bigan", weights="untrained", width=4, encoder_width=4, code_size=8,
+    method = make_method("bigan@1", weights="untrained", width=4, encoder_width=4, code_size=8,
                          hidden=8)
     data = TrainedOn("bev", "KITTI top-view images", ("00", "02"), 4)
     path = method.save(tmp_path / "w.safetensors", parts=("encoder",), trained_on=data.to_dict())
@@ -82,7 +82,7 @@ def test_train_on_the_test_sequence_warns_in_one_line_and_records_it(tmp_path, m
     maps = np.random.default_rng(0).random((12, 41, 41)).astype(np.float32)
     monkeypatch.setattr(train_cli, "load_training_maps", lambda *a, **k: (maps, {"00": 12}))
     out = tmp_path / "run"
-    assert main(["train", "--method", "bigan", "--bev-root", str(root), "--sequences", "00",
+    assert main(["train", "--method", "bigan@1", "--bev-root", str(root), "--sequences", "00",
                  "--epochs", "1", "--batch-size", "4", "--out", str(out), "--no-progress",
                  "--val-task", "none", "--set", "width=4", "--set", "encoder_width=4",
                  "--set", "code_size=8", "--set", "hidden=8"]) == 0
