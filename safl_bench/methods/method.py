@@ -38,6 +38,10 @@ two ways in, one registry:
 
 `make_method(name, weights=..., **params)` builds a configured instance; `list_methods()` says
 what is registered and where each came from (module and distribution).
+
+Several versions of one name may be registered (each its own class): a bare name is the newest
+(`version_key`: "10" after "9"), ``name@version`` selects one (`method_class`), and shipped
+weights belong to one version (`shipped_weights_path`); docs/guides/add-method.md#versions.
 """
 
 from __future__ import annotations
@@ -536,7 +540,8 @@ def _saved_version(path: Path) -> str | None:
 
 def make_method(name: str, *, weights: str | Path | None = None, source: str | None = None,
                 **params: Any) -> Method:
-    """A configured instance of the method registered as `name`.
+    """A configured instance of the method registered as `name` (its newest version) or
+    ``name@version`` (that version; an unregistered one is a RegistryError listing them).
 
     For trainable methods, `weights` picks the learned state:
       * None (default): the shipped weights when the package has them (those trained on
