@@ -199,8 +199,8 @@ def test_the_leaderboard_keeps_two_versions_of_a_name_apart() -> None:
     records = [make_record("stable_afl", method_version=v, condition=c, recall=r, seed=s)
                for v, r in (("1", 0.9), ("2", 0.2)) for c in ("T1R1", "T5R1") for s in (0, 1)]
     table = recall_table(table_key(records[0]), records)
-    assert table.rows == [("stable_afl", "1", "sequence"), ("stable_afl", "1", "single_frame"),
-                          ("stable_afl", "2", "sequence"), ("stable_afl", "2", "single_frame")]
+    assert table.rows == [("stable_afl", "1", "sequence"), ("stable_afl", "1", "single-frame"),
+                          ("stable_afl", "2", "sequence"), ("stable_afl", "2", "single-frame")]
     assert [table.cells[i][0].mean for i in (0, 2)] == [pytest.approx(0.9), pytest.approx(0.2)]
     assert "| stable_afl | 2 | sequence |" in table.markdown()
     # each record's explain command selects its own version (a bare name is the newest)
