@@ -172,7 +172,7 @@ def test_tasks_on_the_images_and_their_records(bev_root, safl_home, tmp_path, ti
     np.testing.assert_array_equal(paper.queries(), expected)
 
     results = tmp_path / "results"
-    code = cli_main(["run", "--method", "stable_afl", "--quiet", "--results", str(results),
+    code = cli_main(["run", "--method", "stable_afl@1", "--quiet", "--results", str(results),
                      "--bev-root", str(bev_root), "--task", RANGES, "--weights", "untrained"])
     assert code == 0
     record = json.loads(next(results.rglob("seed-0.json")).read_text())

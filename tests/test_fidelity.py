@@ -220,12 +220,13 @@ def test_place_recognition_reads_records_and_ranks(tmp_path: Path) -> None:
             write_record(results, make_record(method, protocol="revisit", condition=None, sequence=seq,
                                               source_kind="bev", f1=v, recall_at_1=0.8))
     tasks = ["SAFL/BEVKITTI00-Revisit-v0", "SAFL/BEVKITTI02-Revisit-v0"]
-    pr = F.place_recognition(["sad", "bigan", "stable_afl", "bevplace"], "SAFL/Synth00-Revisit-v4", tasks,
+    pr = F.place_recognition(["sad", "bigan@1", "stable_afl@1", "bevplace"], "SAFL/Synth00-Revisit-v4", tasks,
                              results_dir=results, extra_record_dirs=[extra], run=False)
+    assert list(pr) == ["sad", "bigan@1", "stable_afl@1", "bevplace"]
     assert pr["sad"]["SAFL/BEVKITTI02-Revisit-v0"].f1_max == pytest.approx(0.25)  # single-frame: f1 * 0.5
-    assert pr["bigan"]["SAFL/Synth00-Revisit-v4"].recall_at_1 == pytest.approx(0.25)
+    assert pr["bigan@1"]["SAFL/Synth00-Revisit-v4"].recall_at_1 == pytest.approx(0.25)  # its records
     assert pr["bevplace"]["SAFL/BEVKITTI00-Revisit-v0"].status == "missing"
-    assert pr["bigan"]["SAFL/Synth00-Revisit-v4"].outcomes is None  # these records hold none
+    assert pr["bigan@1"]["SAFL/Synth00-Revisit-v4"].outcomes is None  # these records hold none
     taus = F.ranking_tau(pr, "SAFL/Synth00-Revisit-v4", tasks)
     assert taus == dict.fromkeys([*tasks, "mean"])  # no outcomes: no order beyond the noise
 

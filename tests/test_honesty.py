@@ -26,7 +26,7 @@ SMALL = synth.SynthConfig(frames=160, grid_lines=3, azimuth_res_deg=1.0)
 TASK = "Test/HonestyT1R1-v0"
 NETS = {"width": 8, "encoder_width": 8, "code_size": 128, "hidden": 64, "batch_size": 16}
 #: Stable-AFL takes 5 critic batches per En/De step: on 160 maps it needs more epochs for as many steps
-EPOCHS = {"bigan": 10, "stable_afl": 40}
+EPOCHS = {"bigan@1": 10, "stable_afl@1": 40}
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +49,7 @@ def _single_frame_auc(method, task) -> float:  # type: ignore[no-untyped-def]
     return float(auc)
 
 
-@pytest.mark.parametrize("name", ["stable_afl"])
+@pytest.mark.parametrize("name", ["stable_afl@1"])  # version 1's small networks (NETS)
 def test_trained_network_beats_its_untrained_encoder(small_benchmark: Path, name: str) -> None:
     """Mean over two seeds: GAN training is chaotic, so one run's gain moves with the float
     rounding of the machine (seen here: +0.04 to +0.12 single-frame AUC per seed)."""
@@ -78,7 +78,7 @@ BIGAN_V5 = pytest.mark.xfail(strict=True, reason="shipped BiGAN (data v5): +0.03
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", [pytest.param("bigan", marks=BIGAN_V5), "stable_afl"])
+@pytest.mark.parametrize("name", [pytest.param("bigan@1", marks=BIGAN_V5), "stable_afl@1"])  # version 1 ships synthetic weights
 def test_shipped_weights_beat_the_untrained_network_on_the_default(name: str) -> None:
     """The shipped weights against the same network untrained on SAFL/Synth00-T1R1-v4 (single
     frame ROC AUC; generates the default's sequence 00 when missing, about a minute)."""

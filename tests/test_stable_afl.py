@@ -194,7 +194,7 @@ def test_train_command(tmp_path, monkeypatch, capsys, tiny_val_task):
     record = json.loads((out / "train.json").read_text())
     assert record["method"]["params"]["epochs"] == 2 and record["data"]["maps"] == 12
     loaded = Method.load(out / "stable_afl.safetensors")
-    assert loaded.describe(maps).shape == (12, 16)
+    assert loaded.version == "1" and loaded.describe(maps).shape == (12, 16)  # the saved version
     assert main(["train", "--method", "sad"]) == 2
     assert main(["train", "--method", "bigan", "--set", "nope=1"]) == 2
 

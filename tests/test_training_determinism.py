@@ -28,7 +28,7 @@ def _train_in_a_fresh_process(name: str, seed: int) -> str:
     return done.stdout.strip().splitlines()[-1]
 
 
-@pytest.mark.parametrize("name", ["bigan@1", "stable_afl@1"])
+@pytest.mark.parametrize("name", ["bigan@1", "stable_afl@1"])  # their small networks
 def test_seeded_training_gives_the_same_encoder_in_another_process(name: str) -> None:
     first = _train_in_a_fresh_process(name, 0)
     assert _train_in_a_fresh_process(name, 0) == first

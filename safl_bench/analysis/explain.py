@@ -120,9 +120,10 @@ def rebuild_method(record: ResultRecord) -> Method:
             weights = "untrained"
         else:
             weights = weights_info.get("path")
-    method = make_method(record.method.name, weights=weights, source=source, **params)
+    selected = f"{record.method.name}@{record.method.version}"  # the record's version, not the newest
+    method = make_method(selected, weights=weights, source=source, **params)
     if method_info(method).params != info:
-        raise ConfigError(f"cannot rebuild {record.method.name} as its record has it (other "
+        raise ConfigError(f"cannot rebuild {selected} as its record has it (other "
                           "weights or parameters here); rerun the cell with `safl-bench run --force`")
     return method
 
@@ -131,7 +132,7 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     """Recompute one cell from its record (see the module docstring). `options` is a
     `runner.RunOptions` (results directory, seed, data-source options, progress); a cell
     without a record is a DataError whose message is the run command that makes it."""
-    from safl_bench.methods.method import method_class
+    from safl_bench.methods.method import method_class, method_selector
     from safl_bench.run.runner import _task
     from safl_bench.tasks.registry import runnable_spec
 
@@ -141,7 +142,7 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     path = record_path(options.results_dir, cls.name, cls.version, registered.id, seed)
     if not path.is_file():
         given = None if options.results_dir == default_results_dir() else options.results_dir
-        command = run_command(cls.name, registered.id, seed=options.seed, results=given,
+        command = run_command(method_selector(cls.name, cls.version), registered.id, seed=options.seed, results=given,
                               source_options=_source_flags(options))
         raise DataError(f"no record of {cls.name}@{cls.version} on {registered.id} seed {seed} in "
                         f"{options.results_dir}; make it with: {command}")

@@ -75,8 +75,10 @@ POLAR_RINGS = 20
 POLAR_SECTORS = 60
 POLAR_RADIUS_M = 25.0
 DESCRIPTORS = ("sad", "polar")
-#: Methods compared in the ranking when registered (the top-view methods).
-TOPVIEW_METHODS = ("sad", "bigan", "stable_afl", "bevplace")
+#: Methods compared in the ranking when registered (the top-view methods). BiGAN and Stable-AFL
+#: at version 1: the versions whose shipped weights were trained on the synthetic default (the
+#: weights these rankings run, `place_recognition`); version 2 ships weights for real top views only.
+TOPVIEW_METHODS = ("sad", "bigan@1", "stable_afl@1", "bevplace")
 #: Frames whose pairs farther than FAR_M give the normaliser (evenly spaced).
 FAR_SAMPLE = 500
 #: Query frames compared at once when collecting the near pairs.
@@ -568,7 +570,7 @@ def place_recognition(
             by_key[record.key] = record
 
     def from_record(m: str, t: str) -> MethodResult | None:
-        key = (m, instances[m].version, t, spec(t).seed)
+        key = (instances[m].name, instances[m].version, t, spec(t).seed)
         record = by_key.get(key)
         if record is None or "single_frame" not in record.results:
             return None

@@ -29,7 +29,14 @@ from typing import Any
 
 import numpy as np
 
-from safl_bench.methods.method import Method, list_methods, make_method, method_input
+from safl_bench.methods.method import (
+    Method,
+    list_methods,
+    make_method,
+    method_class,
+    method_input,
+    shipped_weights_path,
+)
 from safl_bench.run import timing
 
 DEFAULT_TASK = "SAFL/Synth00-T0R0-v4"
@@ -79,6 +86,7 @@ def bench_method(
     out: dict[str, Any] = {
         "method": method.name,
         "version": method.version,
+        "weights": (method.weights_info or {}).get("source"),
         "input": method.input_kind,
         "batch1": batch1.to_dict(),
         "batched": batched.to_dict(),
@@ -141,39 +149,58 @@ def run(
     matrix_n: int | None = MATRIX_N,
     progress: bool = True,
 ) -> list[dict[str, Any]]:
-    """Figures for each method (default: every registered one), with the shipped weights where
-    a method has them (timing does not depend on the weights' values)."""
+    """Figures for each method (default: every registered version of every method, `name@V`
+    where a name has several), with the shipped weights where a method has them and its
+    untrained networks where it has none (timing does not depend on the weights' values)."""
     from safl_bench.tasks.task import make
 
-    names = list(methods) if methods else [info.name for info in list_methods()]
+    names = list(methods) if methods else default_methods()
+    for name in names:
+        method_class(name)  # an unknown name or version fails before any work
     task = make(task_id, progress=progress)
     results = []
     for name in names:
-        method = make_method(name)
+        cls = method_class(name)
+        untrained = cls.trainable and shipped_weights_path(cls) is None
+        method = make_method(name, weights="untrained" if untrained else None)
         views = task.database(method.input_kind)
         results.append(bench_method(method, views, frames=frames, repeats=repeats, matrix_n=matrix_n))
     return results
 
 
+def default_methods() -> list[str]:
+    """Every registered version of every method, as a command selects it: `name@V` where the
+    name has several versions, else the bare name."""
+    infos = list_methods(all_versions=True)
+    names = [i.name for i in infos]
+    return [f"{i.name}@{i.version}" if names.count(i.name) > 1 else i.name for i in infos]
+
+
 def format_results(results: Sequence[dict[str, Any]]) -> str:
-    """A plain-text table: ms/frame at batch 1, frames/s batched, matrix seconds."""
+    """A plain-text table: ms/frame at batch 1, frames/s batched, matrix seconds (a method
+    timed at two versions is labelled `name@V`)."""
+    names = [r["method"] for r in results]
+
+    def who(r: dict[str, Any]) -> str:
+        return f"{r['method']}@{r.get('version')}" if names.count(r["method"]) > 1 else str(r["method"])
+
     lines = [f"{'method':14s} {'input':8s} {'ms/frame (b=1)':>15s} {'frames/s (batched)':>19s} "
              f"{'4541² matrix s':>15s}"]
     for r in results:
         matrix = r.get("matrix")
         mat = f"{matrix['median_s']:.2f}" if matrix else "-"
-        lines.append(f"{r['method']:14s} {r['input']:8s} {r['batch1']['per_item_ms']:15.2f} "
+        lines.append(f"{who(r):14s} {r['input']:8s} {r['batch1']['per_item_ms']:15.2f} "
                      f"{r['batched']['extra']['frames_per_s']:19.0f} {mat:>15s}")
     for r in results:
         ref = (r.get("matrix") or {}).get("reference")
         if ref:
-            lines.append(f"({r['method']}: matrix {r['matrix']['median_s']:.2f} s against {ref['median_s']:.2f} s "
+            lines.append(f"({who(r)}: matrix {r['matrix']['median_s']:.2f} s against {ref['median_s']:.2f} s "
                          f"with {ref['name']} in the same run, {ref['speedup']:.1f}x; "
                          + ("bitwise equal" if ref["bitwise_equal"] else f"max abs diff {ref['max_abs_diff']:.1e}")
                          + ")")
         bound = (r.get("matrix") or {}).get("bound")
         if bound:
-            lines.append(f"({r['method']}: matrix {bound['matrix_s']:.2f} s against the bound "
+            lines.append(f"({who(r)}: matrix {bound['matrix_s']:.2f} s against the bound "
                          f"{bound['bound_s']:.2f} s, {bound['absdiffs'] / 1e9:.1f} G absolute differences at "
                          f"{bound['rate_per_s'] / 1e9:.1f} G/s, this CPU's vector rate measured just before: "
                          f"{bound['ratio']:.2f}x the bound; by CPU time {bound['matrix_cpu_s']:.2f} s against "
@@ -181,7 +208,7 @@ def format_results(results: Sequence[dict[str, Any]]) -> str:
                          f"{bound['rounds']} rounds)")
     for r in results:
         if r.get("views"):
-            lines.append(f"({r['method']}: {r['views']}; batched: {r['batched']['n_items']} frames)")
+            lines.append(f"({who(r)}: {r['views']}; batched: {r['batched']['n_items']} frames)")
     env = results[0]["batch1"]["env"] if results else None
     if env:
         lines.append(f"({env['cpu_model']}, {env['usable_cpus']} CPUs, torch threads "

@@ -10,8 +10,8 @@
                                                  cached
   safl-bench bench bevplace [--reference DIR]    BEVPlace against its authors' code (run side by
                                                  side) and against the compute bound, both ratios
-  safl-bench bench seeds --bev-root DIR          five seeds of a cell against one (stable_afl,
-                                                 bigan on real 00), interval overhead
+  safl-bench bench seeds --bev-root DIR          five seeds of a cell against one (stable_afl@1,
+                                                 bigan@1 on real 00), interval overhead
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -30,7 +30,8 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
     parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds"), help="what to time")
-    parser.add_argument("--method", action="append", help="a method to time (repeatable; default: all)")
+    parser.add_argument("--method", action="append", help="a method to time, NAME or NAME@VERSION (repeatable; default: every registered "
+                        "version; seeds: stable_afl@1, bigan@1)")
     parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v4; "
                         "seeds: the cell run, default SAFL/BEVKITTI00-T1R1-v0)")
     parser.add_argument("--frames", type=int, default=None,

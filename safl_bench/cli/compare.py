@@ -25,7 +25,8 @@ DEFAULT_MEASURES = ("recall_at_100_precision", "f1_max", "recall_at_1", "auc")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", action="append", required=True, metavar="NAME[@VERSION]",
-                   help="give exactly two: A, then B")
+                   help="give exactly two: A, then B (a bare name is its newest version; "
+                        "name@VERSION picks one, e.g. two versions of one method)")
     p.add_argument("--task", action="append", metavar="ID|SUITE",
                    help="task id or suite (as for `run`); repeatable; default: every task both "
                         "methods have records of")
@@ -38,25 +39,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"repeatable; default: {', '.join(DEFAULT_MEASURES)}")
 
 
-def _parse_method(text: str) -> tuple[str, str | None]:
-    name, _, version = text.partition("@")
-    return name, version or None
-
-
 def _pick(records: list[ResultRecord], text: str) -> dict[str, dict[int, ResultRecord]]:
-    """{task id: {seed: record}} of one method (its newest version when none is named)."""
-    name, version = _parse_method(text)
+    """{task id: {seed: record}} of one method at one version: `name@V`, or for a bare name its
+    newest registered version (what a bare name means in every command; the newest version
+    with records when the name is not registered here). Records of two versions never mix."""
+    from safl_bench.methods.method import method_versions, version_key
+
+    name, _, version = text.partition("@")
     mine = [r for r in records if r.method.name == name]
     if not mine:
         raise DataError(f"no records of method {name!r} (methods with records: "
                         f"{', '.join(sorted({r.method.name for r in records})) or 'none'})")
-    version = version or max((r.method.version for r in mine), key=lambda v: (len(v), v))
+    held = sorted({r.method.version for r in mine}, key=version_key)
+    registered = method_versions(name)
+    version = version or (registered[-1] if registered else held[-1])
     out: dict[str, dict[int, ResultRecord]] = defaultdict(dict)
     for r in mine:
         if r.method.version == version:
             out[r.task.id][r.seed] = r
     if not out:
-        raise DataError(f"no records of {name}@{version}")
+        bare = "" if "@" in text else f" (a bare {name!r} is its newest version, {version})"
+        raise DataError(f"no records of {name}@{version}{bare}; records of "
+                        f"{', '.join(f'{name}@{v}' for v in held)}"
+                        + (f"; registered: {', '.join(f'{name}@{v}' for v in registered)}"
+                           if registered else ""))
     return out
 
 

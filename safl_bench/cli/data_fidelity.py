@@ -52,7 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--records", metavar="DIR", action="append", default=[],
                         help="more record folders to read (never written), e.g. leaderboard/records")
     parser.add_argument("--methods", nargs="+", metavar="NAME", default=None,
-                        help="top-view methods to rank (default: sad bigan stable_afl bevplace, those registered)")
+                        help="top-view methods to rank, NAME or NAME@VERSION (default: sad bigan@1 "
+                             "stable_afl@1 bevplace, those registered)")
     parser.add_argument("--no-run", action="store_true", help="only read records; run no missing cell")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -182,7 +183,7 @@ def _order_json(order: Any) -> dict[str, Any]:
 def main(args: argparse.Namespace) -> int:
     from safl_bench.analysis import fidelity as F
     from safl_bench.common.fingerprint import to_jsonable
-    from safl_bench.methods.method import list_methods
+    from safl_bench.methods.method import list_methods, method_class
     from safl_bench.results.records import default_results_dir
     from safl_bench.sources import bev_source, synth_source
     from safl_bench.tasks import spec
@@ -196,6 +197,8 @@ def main(args: argparse.Namespace) -> int:
     if args.step < 1:
         raise DataError(f"--step must be >= 1, got {args.step}")
     root = _real_root(args.bev_root)
+    for name in args.methods or ():
+        method_class(name)  # an unknown name or version fails before any work
     real = bev_source(root)
     for name in args.sequences:  # every requested sequence is there before any work
         real.sequence(str(name))
@@ -235,7 +238,8 @@ def main(args: argparse.Namespace) -> int:
     curves_s = time.perf_counter() - started
 
     registered = {m.name for m in list_methods()}
-    methods = [m for m in (args.methods or F.TOPVIEW_METHODS) if args.methods or m in registered]
+    methods = [m for m in (args.methods or F.TOPVIEW_METHODS)
+               if args.methods or m.partition("@")[0] in registered]
     synth_task = revisit_id("synth", args.synth_sequence)
     real_tasks = [revisit_id("bev", str(s)) for s in args.sequences]
     pr: dict[str, dict[str, F.MethodResult]] = {}

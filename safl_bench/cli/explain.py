@@ -18,13 +18,15 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--method", required=True, help="the method of the cell (its record's)")
+    parser.add_argument("--method", required=True, metavar="NAME[@VERSION]",
+                        help="the method of the cell (its record's; a bare name is its newest version)")
     parser.add_argument("--task", required=True, metavar="ID", help="the task id of the cell")
     parser.add_argument("--seed", type=seed, help="seed of the query noise (default: the task's own)")
     parser.add_argument("--results", metavar="DIR",
                         help="records directory (default: $SAFL_RESULTS or ./results)")
     parser.add_argument("--out", metavar="PNG",
-                        help="the figure (default: explain-<method>-<task>-seed<N>.png here)")
+                        help="the figure (default: explain-<method>-<task>-seed<N>.png here; <method> is "
+                             "name@VERSION for a version that is not the newest)")
     parser.add_argument("--top", type=int, default=4, metavar="N",
                         help="how many of the most confident wrong matches to show (default 4)")
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root (KITTI tasks)")
@@ -35,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from safl_bench.analysis.explain import draw, explain, summary
     from safl_bench.errors import ConfigError
+    from safl_bench.methods.method import method_selector
     from safl_bench.results.records import default_results_dir
     from safl_bench.run.runner import RunOptions
     from safl_bench.tasks import spec
@@ -51,8 +54,9 @@ def main(args: argparse.Namespace) -> int:
     )
     ex = explain(args.method, args.task, options, top=args.top)
     task_id = spec(args.task).id
+    method = method_selector(ex.record.method.name, ex.record.method.version)
     out = Path(args.out) if args.out else Path(
-        f"explain-{ex.record.method.name}-{task_id.replace('/', '_')}-seed{ex.record.seed}.png")
+        f"explain-{method}-{task_id.replace('/', '_')}-seed{ex.record.seed}.png")
     draw(ex, out)
     print(summary(ex))
     print(f"figure: {out}")

@@ -299,7 +299,10 @@ def _cell(table: Table, i: int, j: int, fmt: ValueFormat, mark: str | None,
 
 def explain_command(record: ResultRecord, records_folder: str) -> str:
     """The `safl-bench explain` command that draws `record`'s cell."""
-    parts = ["safl-bench explain", f"--method {record.method.name}", f"--task {record.task.id}",
+    from safl_bench.methods.method import method_selector
+
+    method = method_selector(record.method.name, record.method.version)  # the record's version
+    parts = ["safl-bench explain", f"--method {method}", f"--task {record.task.id}",
              f"--seed {record.seed}", f"--results {records_folder}"]
     if record.task.source_kind in ROOT_OPTION:
         parts.append(ROOT_OPTION[record.task.source_kind])

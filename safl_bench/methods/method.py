@@ -38,6 +38,10 @@ two ways in, one registry:
 
 `make_method(name, weights=..., **params)` builds a configured instance; `list_methods()` says
 what is registered and where each came from (module and distribution).
+
+Several versions of one name may be registered (each its own class): a bare name is the newest
+(`version_key`: "10" after "9"), ``name@version`` selects one (`method_class`), and shipped
+weights belong to one version (`shipped_weights_path`); docs/guides/add-method.md#versions.
 """
 
 from __future__ import annotations
@@ -236,8 +240,9 @@ class Method:
     def load(cls, path: str | Path, **overrides: Any) -> Method:
         """Build a method from a file written by `save` (safetensors only; no code runs).
 
-        Called on a subclass, the file must be that method's; called on `Method`, the class is
-        found in the registry by the name stored in the file. `overrides` may change only
+        Called on a subclass, the file must be that method's and that version's; called on
+        `Method`, the class is found in the registry by the name and version stored in the file
+        (the newest version when the saved one is not registered). `overrides` may change only
         `runtime_params` (parameters that do not change the outputs)."""
         from safl_bench.methods.weights import file_sha256, load_tensors
 
@@ -252,6 +257,11 @@ class Method:
             target = method_class(f"{info['name']}@{saved}" if saved in known else str(info["name"]))
         elif info["name"] != cls.name:
             raise DataError(f"{path} holds weights of method {info['name']!r}, not {cls.name!r}")
+        elif info.get("version") and str(info["version"]) != str(cls.version):
+            # one version never runs another's weights (their networks and outputs differ)
+            raise DataError(f"{path} holds weights of {cls.name}@{info['version']}, not of "
+                            f"{cls.name}@{cls.version}; select that version: --method "
+                            f"{cls.name}@{info['version']}")
         params = dict(info.get("params", {}))
         for key, value in overrides.items():
             if key in params and params[key] != value and key not in target.runtime_params:
@@ -473,6 +483,14 @@ def method_class(name: str) -> type[Method]:
     raise RegistryError(f"unknown method {name!r}{hint} (known: {', '.join(known) or 'none'})")
 
 
+def method_selector(name: str, version: str) -> str:
+    """What a command takes to select `name` at `version`: the bare name when that is the
+    newest registered version (what a bare name means), else ``name@version``; commands printed
+    for a record (explain, run) use it so that they pick the record's version."""
+    versions = method_versions(name)
+    return name if versions and versions[-1] == str(version) else f"{name}@{version}"
+
+
 def _ships_weights(cls: type[Method]) -> bool:
     """A method that is not trained here but runs published weights shipped with it (class
     attribute `ships_weights = True`; its constructor loads them)."""
@@ -522,7 +540,8 @@ def _saved_version(path: Path) -> str | None:
 
 def make_method(name: str, *, weights: str | Path | None = None, source: str | None = None,
                 **params: Any) -> Method:
-    """A configured instance of the method registered as `name`.
+    """A configured instance of the method registered as `name` (its newest version) or
+    ``name@version`` (that version; an unregistered one is a RegistryError listing them).
 
     For trainable methods, `weights` picks the learned state:
       * None (default): the shipped weights when the package has them (those trained on

@@ -40,7 +40,7 @@ from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation.cell import DatabaseMemo, evaluate_method
 from safl_bench.evaluation.metrics import METRICS_VERSION, NoPositivesError
 from safl_bench.matching.settings import MODES, EvaluationConfig, same_settings
-from safl_bench.methods.method import Method, input_note, method_input
+from safl_bench.methods.method import Method, input_note, method_input, method_selector
 from safl_bench.results.records import (
     CorruptRecordError,
     EvaluatedCell,
@@ -97,6 +97,7 @@ class CellOutcome:
     record: ResultRecord | None = None
     message: str = ""
     method: str = ""  # the method's name
+    version: str = ""  # and its version (two versions of one name are two methods)
     timed_here: bool = False  # its batch-1 timing was measured for this record (`finish_cell`)
 
 
@@ -159,7 +160,8 @@ def _existing(
         else:
             why = _same_run(old.method, old.task, old.matcher, info, registered.fingerprint, matcher)
             if not why and old.metrics_version == METRICS_VERSION:
-                return seed, CellOutcome(registered.id, seed, "reused", path, old, method=info.name)
+                return seed, CellOutcome(registered.id, seed, "reused", path, old, method=info.name,
+                                         version=info.version)
             if not why:
                 try:
                     new: ResultRecord | None = rescore(old)
@@ -168,7 +170,7 @@ def _existing(
                 if new is not None and new.metrics_version == METRICS_VERSION:
                     written = write_record(options.results_dir, new)
                     return seed, CellOutcome(registered.id, seed, "rescored", written, new,
-                                             method=info.name)
+                                             method=info.name, version=info.version)
                 log(f"note: {path} was scored with metrics version {old.metrics_version} "
                     f"(this code: {METRICS_VERSION}) and holds no per-query outcomes; "
                     "recomputing it (its timings are kept)")
@@ -323,7 +325,8 @@ def _write(options: RunOptions, cell: EvaluatedCell, timings: Timings) -> CellOu
     written = write_record(options.results_dir, record)
     evaluated_path(options.results_dir, cell.method.name, cell.method.version, cell.task.id,
                    cell.seed).unlink(missing_ok=True)
-    return CellOutcome(cell.task.id, cell.seed, "computed", written, record, method=cell.method.name)
+    return CellOutcome(cell.task.id, cell.seed, "computed", written, record, method=cell.method.name,
+                       version=cell.method.version)
 
 
 def run_cell(
@@ -420,7 +423,8 @@ def run_grid(
         path = record_path(opts.results_dir, method.name, method.version, task_id, seed)
         label = task_id if len(methods) == 1 else f"{method.name} on {task_id}"
         say(f"error: {label} (seed {seed}): {message}")
-        return CellOutcome(task_id, seed, "failed", path, message=message, method=method.name)
+        return CellOutcome(task_id, seed, "failed", path, message=message, method=method.name,
+                           version=str(method.version))
 
     outcomes: dict[int, CellOutcome] = {}
     evaluated: dict[int, EvaluatedCell] = {}
@@ -539,12 +543,22 @@ def _prepare_views(
     return tasks
 
 
+def method_labels(outcomes: Sequence[CellOutcome]) -> dict[tuple[str, str], str]:
+    """The run table's label of each (method, version) of `outcomes`: the name, or `name@V`
+    where the outcomes hold two versions of that name (they are two methods, never one cell)."""
+    pairs = list(dict.fromkeys((o.method, o.version) for o in outcomes))
+    names = [name for name, _ in pairs]
+    return {(n, v): f"{n}@{v}" if names.count(n) > 1 else n for n, v in pairs}
+
+
 def _cells(outcomes: Sequence[CellOutcome]) -> list[tuple[str, str, list[CellOutcome]]]:
-    """(method, task, its seeds' outcomes that have a record), in the order cells first appear."""
+    """(method label, task, its seeds' outcomes that have a record), in the order cells first
+    appear; one cell per method version (`method_labels`)."""
+    labels = method_labels(outcomes)
     cells: dict[tuple[str, str], list[CellOutcome]] = {}
     for o in outcomes:
         if o.record is not None:
-            cells.setdefault((o.method, o.task_id), []).append(o)
+            cells.setdefault((labels[(o.method, o.version)], o.task_id), []).append(o)
     return [(m, t, sorted(v, key=lambda o: o.seed)) for (m, t), v in cells.items()]
 
 
@@ -554,13 +568,15 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     one confident false positive (F1max, Recall@1, AUC) of the sequence matcher, then
     single-frame matching, each as its mean over the seeds and 95 % interval over seeds and
     queries (`safl_bench.evaluation.uncertainty`); ms/frame as the median over the seeds' records and
-    their range. A method column only when there are several; a failed seed gets its own row."""
+    their range. A method column only when there are several (two versions of one name are
+    two, labelled `name@V`); a failed seed gets its own row."""
     from safl_bench.evaluation.uncertainty import bootstrap
     from safl_bench.matching.presets import label
     from safl_bench.methods.training_data import record_seen
     from safl_bench.results.records import seed_outcomes
 
-    by_method = len({o.method for o in outcomes}) > 1
+    labels = method_labels(outcomes)
+    by_method = len(labels) > 1
     lead = ("method",) if by_method else ()
     header = (*lead, "task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC",
               "R@100%P 1-frame", "R@1 1-frame", "ms/frame", "record")
@@ -598,7 +614,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         ))
     for o in outcomes:
         if o.record is None:
-            key = ((o.method,) if by_method else ()) + (o.task_id, str(o.seed))
+            key = ((labels[(o.method, o.version)],) if by_method else ()) + (o.task_id, str(o.seed))
             rows.append((*key, *["—"] * (len(header) - len(key) - 1), f"failed: {o.message}"))
     widths = [max(len(r[i]) for r in (header, *rows)) for i in range(len(header))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
@@ -650,6 +666,7 @@ def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
     first = cells[0]
     option = ROOT_OPTION.get(first.record.task.source_kind) if first.record is not None else None
     root = f" {option}" if option else ""
+    selector = method_selector(first.method, first.version) if first.version else first.method
     return (f"note: recall at 100 % precision is 0.0 in {len(cells)} record(s) whose matches are mostly "
             "correct (R@1 >= 50 %): the most confident wrong match comes before any correct one; "
-            f"see which with `safl-bench explain --method {first.method} --task {first.task_id}{root}`")
+            f"see which with `safl-bench explain --method {selector} --task {first.task_id}{root}`")
