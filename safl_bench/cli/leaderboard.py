@@ -7,7 +7,9 @@ built from the other records and the command exits with status 2.
 Defaults make the leaderboard directory self-contained: it holds its records (records/), the
 records of the same tasks under other matcher presets (preset-records/<preset>/: a record's path
 does not name its preset) and training logs (training-logs/) beside the generated tables and
-figures, so running the command at the root of a safl-bench checkout rebuilds the committed
+figures, the records of checkpoints selected on the test set (selected-records/: shown only in
+Table II, in rows of their own) and Table II's variants (experiments/table2/<name>/: records with
+one thing changed and a variant.json naming it), so running the command at the root of a safl-bench checkout rebuilds the committed
 leaderboard exactly. It also writes the web pages (OUT/site/index.html, opened from disk) and,
 when OUT is a checkout's leaderboard/, the headline block of that checkout's README.md.
 """
@@ -18,10 +20,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from safl_bench.leaderboard import build_leaderboard
+from safl_bench.leaderboard import build_leaderboard, table2
 from safl_bench.leaderboard.headline import update_readme
 from safl_bench.matching.presets import label
 from safl_bench.results.records import Problem, ResultRecord, load_records
+
+SELECTED_RECORDS = "selected-records"
+TABLE2_VARIANTS = "experiments/table2"
 
 HELP = "regenerate the leaderboard (Markdown/CSV tables, PNG figures, web pages) from result records"
 
@@ -90,6 +95,11 @@ def main(args: argparse.Namespace) -> int:
     records, problems = load_records(results)
     preset_records, bad = load_preset_records(out)
     shown = {id(r): _shown(out / "preset-records" / label(r.matcher)) for r in preset_records}
+    # checkpoints selected on the test set: only Table II shows them, in rows of their own
+    selected, bad_selected = load_records(out / SELECTED_RECORDS)
+    shown.update({id(r): _shown(out / SELECTED_RECORDS) for r in selected})
+    variants, bad_variants = table2.load_variants(out / TABLE2_VARIANTS)
+    bad = [*bad, *bad_selected, *bad_variants]
     results_shown = _shown(results)
     problems += bad
     for problem in problems:
@@ -103,6 +113,8 @@ def main(args: argparse.Namespace) -> int:
         skipped_base=results,
         figures=not args.no_figures,
         preset_records=preset_records,
+        selected_records=selected,
+        table2_variants=variants,
         site=not args.no_site,
         records_folder=lambda record: shown.get(id(record), results_shown),
     )

@@ -117,6 +117,8 @@ def build_leaderboard(
     skipped_base: str | os.PathLike[str] | None = None,
     figures: bool = True,
     preset_records: Sequence[ResultRecord] = (),
+    selected_records: Sequence[ResultRecord] = (),
+    table2_variants: Sequence[table2.Variant] = (),
     site: bool = True,
     records_folder: Callable[[ResultRecord], str] | None = None,
 ) -> BuildReport:
@@ -185,14 +187,15 @@ def build_leaderboard(
                                 title=f"Sequence matcher by preset: {title}")))
                     writer.text(f"tables/{base}-{stem}.csv", by_preset.csv())
                     entry.inline.append(by_preset.markdown(level=4))
-                side = table2.side_by_side([*group, *presets])
+                side = table2.side_by_side([*group, *presets], selected_records)
                 if side:
                     rel = writer.text(f"tables/{base}-table2-side-by-side.md",
-                                      table2.markdown(side, level=1))
+                                      table2.markdown(side, level=1, variants=table2_variants))
                     writer.text(f"tables/{base}-table2-side-by-side.csv", table2.csv(side))
                     entry.tables.append(("Table II side by side", rel))
                     report.table2[key] = (side, rel)
-                    entry.inline.append(table2.markdown(side, level=4))
+                    report.table2_notes[key] = (table2.orders(side), table2.causes(side, table2_variants))
+                    entry.inline.append(table2.markdown(side, level=4, variants=table2_variants))
             if figures:
                 entry.figures.append(
                     ("AUC heat map", writer.figure(heatmap, partial(figs.auc_heatmap, auc)))

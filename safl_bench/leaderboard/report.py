@@ -50,6 +50,9 @@ class BuildReport:
     training_figures: list[tuple[str, str, list[str]]] = field(default_factory=list)
     #: Table II beside ours (`table2.side_by_side`), per table group that has it, with its Markdown
     table2: dict[TableKey, tuple[list[Row], str]] = field(default_factory=dict)
+    #: per table group with Table II: the lines on the paper's order and on each cell outside
+    #: its interval (`table2.orders`, `table2.causes`)
+    table2_notes: dict[TableKey, tuple[list[str], list[str]]] = field(default_factory=dict)
 
 
 def headline_rank(key: TableKey) -> tuple[object, ...]:

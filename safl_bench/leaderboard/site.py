@@ -258,12 +258,17 @@ def _table2_section(report: BuildReport, key: TableKey | None) -> str:
                          else f"<td>{_e(c)}</td>" for h, c in zip(table2.header(), table2.cells(row), strict=True))
         + "</tr>" for row in rows)
     summary = "".join(f"<li>{_inline_code(line)}</li>" for line in table2.summary(rows))
+    order, why = report.table2_notes.get(key, ([], []))
+    extra = "".join(f"<h3>{_e(title)}</h3><ul class=\"notes\">{''.join(f'<li>{_inline_code(x)}</li>' for x in lines)}</ul>"
+                    for title, lines in (("The paper's order (Stable-AFL > BiGAN > SAD), our measure", order),
+                                         ("What each cell outside its interval gives under the changes measured", why))
+                    if lines)
     return (f'<section class="table2" id="table2-{_e(slugify(key.stem))}">'
             f"<h2>{_e(table2.TITLE)}</h2><p>{_inline_code(table2.INTRO)}</p>"
             f'<p class="meta"><a class="source-md" href="../{_e(md)}">Markdown</a> · '
             f'<a href="../{_e(md[:-3] + ".csv")}">CSV</a></p>'
             f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
-            f'</div><ul class="notes">{summary}</ul></section>')
+            f'</div><ul class="notes">{summary}</ul>{extra}</section>')
 
 
 def _cell(table: Table, i: int, j: int, fmt: ValueFormat, mark: str | None,

@@ -15,16 +15,33 @@ over correct matches at the first precision >= 0.99). Each is the mean over the 
 with the 95 % interval over seeds and queries (`safl_bench.evaluation.uncertainty`, the same bootstrap as
 every other table), and says whether the paper's value lies inside it (the paper prints one
 decimal, so an interval is widened by that rounding, 0.05 points, on each side).
+
+Rows are per method, version and weights (`weights_text`: the data they were trained on, how
+many iterations, and which checkpoint: the last one, or the one the authors' way of choosing
+picks, the best on 00, marked as selected on the test set: `selected`, records kept out of
+every other table).
+
+What explains a cell outside its interval is read from experiments, not written by hand:
+`Variant`s are record sets of the same tasks with one thing changed (their `label` says what;
+`load_variants` reads them from folders with a `variant.json`), and the table's other rows of the
+same method and condition (another version, another checkpoint) count as such changes too.
+`causes` gives one line per row outside its interval: each change measured on that cell, its
+mean [interval], and whether it holds the paper's value; a cell that no change brings onto the
+paper's value says so. `orders` counts, per condition, whether the paper's order holds between
+the methods' rows (non-overlapping intervals: an order; overlapping: a tie).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 from safl_bench.evaluation.uncertainty import Interval
 from safl_bench.leaderboard import intervals
-from safl_bench.results.records import ResultRecord
+from safl_bench.results.records import Problem, ResultRecord, load_records
 
 #: Table II's columns, in the paper's order.
 CONDITIONS = ("T1R1", "T5R1", "T10R1", "T20R1", "T1R1.5", "T5R1.5", "T10R1.5", "T20R1.5",
@@ -63,6 +80,7 @@ class Row:
     paper: float
     ours: dict[str, Interval | None]
     seeds: tuple[int, ...]
+    weights: str = "none"
 
     def inside(self, measure: str) -> bool | None:
         """Whether the paper's value lies in our interval of `measure` (None: no interval)."""
@@ -72,40 +90,179 @@ class Row:
         return iv.low * 100 - 0.05 <= self.paper <= iv.high * 100 + 0.05
 
 
-def _selected(records: Sequence[ResultRecord]) -> dict[tuple[str, str, str], list[ResultRecord]]:
-    """The records of each (method, version, condition) under that method's preset (exactly
-    the preset, nothing changed on top), on the real-KITTI 00 paper tasks."""
+def weights_text(record: ResultRecord) -> str:
+    """What a record's weights are, in words: training data, iterations, checkpoint ("none"
+    for methods without weights)."""
+    from safl_bench.methods.training_data import trained_on
+
+    config: dict[str, Any] = record.method.params
+    info = config.get("weights")
+    if not isinstance(info, dict) or info.get("source") == "untrained":
+        return "none" if not isinstance(info, dict) else "untrained"
+    data = trained_on(info)
+    raw = info.get("trained_on")
+    stored: dict[str, Any] = raw if isinstance(raw, dict) else {}
+    parts = []
+    if data is not None:
+        every = "" if data.step == 1 else f" every {data.step}th frame"
+        parts.append(f"{data.dataset} {'+'.join(data.sequences)}{every}")
+    steps = stored.get("steps", (config.get("params") or {}).get("iterations"))
+    if isinstance(steps, int):
+        parts.append(f"{steps} iterations")
+    if stored.get("selected_on"):
+        parts.append("best on 00, selected on the test set")
+    elif isinstance(steps, int):
+        parts.append("last checkpoint")
+    return ", ".join(parts) or str(info.get("source", "weights"))
+
+
+def _selected(records: Sequence[ResultRecord]) -> dict[tuple[str, str, str, str], list[ResultRecord]]:
+    """The records of each (method, version, weights, condition) under that method's preset
+    (exactly the preset, nothing changed on top), on the real-KITTI 00 paper tasks."""
     from safl_bench.matching.presets import label
 
-    cells: dict[tuple[str, str, str], list[ResultRecord]] = {}
+    cells: dict[tuple[str, str, str, str], list[ResultRecord]] = {}
     for r in records:
         name = r.method.name
         if (name in PUBLISHED and r.task.source_kind == SOURCE_KIND and r.task.protocol == "paper"
                 and r.task.sequence == SEQUENCE and r.task.condition in CONDITIONS
                 and label(r.matcher) == PRESET_OF[name]):
-            cells.setdefault((name, r.method.version, r.task.condition), []).append(r)
+            cells.setdefault((name, r.method.version, weights_text(r), r.task.condition), []).append(r)
     return cells
 
 
-def side_by_side(records: Sequence[ResultRecord]) -> list[Row]:
+def _interval(recs: Sequence[ResultRecord]) -> dict[str, Interval | None]:
+    ours: dict[str, Interval | None] = {m: None for m, _ in MEASURES}
+    if recs:
+        sample = intervals.cell_sample(list(recs), "sequence")
+        if sample is not None:
+            found = sample.intervals()
+            ours = {m: found.get(m) for m, _ in MEASURES}
+    return ours
+
+
+def side_by_side(records: Sequence[ResultRecord], selected: Sequence[ResultRecord] = ()) -> list[Row]:
     """Table II's cells beside ours, in the paper's row and column order (module docstring);
-    [] when no record is under the authors' presets."""
-    cells = _selected(records)
+    `selected`: records made with checkpoints selected on the test set (rows of their own,
+    after the others); [] when no record is under the authors' presets."""
+    cells = _selected([*records, *selected])
     rows = []
     for name in PUBLISHED:
-        versions = sorted({v for (n, v, _) in cells if n == name})
-        for version in versions:
+        keys = sorted({(v, w) for (n, v, w, _) in cells if n == name},
+                      key=lambda vw: (vw[0], "selected on the test set" in vw[1], vw[1]))
+        for version, weights in keys:
             for condition in CONDITIONS:
-                recs = sorted(cells.get((name, version, condition), []), key=lambda r: r.seed)
-                ours: dict[str, Interval | None] = {m: None for m, _ in MEASURES}
-                if recs:
-                    sample = intervals.cell_sample(recs, "sequence")
-                    if sample is not None:
-                        found = sample.intervals()
-                        ours = {m: found.get(m) for m, _ in MEASURES}
-                rows.append(Row(name, version, condition, PUBLISHED[name][condition], ours,
-                                tuple(r.seed for r in recs)))
+                recs = sorted(cells.get((name, version, weights, condition), []), key=lambda r: r.seed)
+                rows.append(Row(name, version, condition, PUBLISHED[name][condition], _interval(recs),
+                                tuple(r.seed for r in recs), weights))
     return rows
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Records of the Table II tasks with one thing changed (`label` says what), to measure
+    what that change does to a cell."""
+
+    name: str
+    label: str
+    records: list[ResultRecord] = field(default_factory=list)
+    about: str = ""
+
+    def cell(self, method: str, version: str, condition: str) -> dict[str, Interval | None] | None:
+        """This variant's intervals on one cell; None when it has no records there."""
+        recs = sorted((r for r in self.records if r.method.name == method and r.method.version == version
+                       and r.task.source_kind == SOURCE_KIND and r.task.sequence == SEQUENCE
+                       and r.task.protocol == "paper" and r.task.condition == condition),
+                      key=lambda r: r.seed)
+        return _interval(recs) if recs else None
+
+
+VARIANT_FILE = "variant.json"
+
+
+def load_variants(folder: Path) -> tuple[list[Variant], list[Problem]]:
+    """Every `<folder>/<name>/variant.json` ({"label": ..., "about": ...}) with the records
+    beside it; a folder without a readable variant.json is a problem, not a variant."""
+    variants: list[Variant] = []
+    problems: list[Problem] = []
+    for sub in sorted(p for p in folder.iterdir() if p.is_dir()) if folder.is_dir() else []:
+        path = sub / VARIANT_FILE
+        try:
+            meta = json.loads(path.read_text(encoding="utf-8"))
+            label = str(meta["label"])
+        except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+            problems.append(Problem(path, f"not a Table II variant ({exc})"))
+            continue
+        records, bad = load_records(sub)
+        problems += bad
+        variants.append(Variant(sub.name, label, records, str(meta.get("about", ""))))
+    return variants, problems
+
+
+def _holds(paper: float, iv: Interval | None) -> bool | None:
+    if iv is None or iv.low != iv.low:
+        return None
+    return iv.low * 100 - 0.05 <= paper <= iv.high * 100 + 0.05
+
+
+def causes(rows: Sequence[Row], variants: Sequence[Variant] = (), measure: str = MEASURES[0][0]) -> list[str]:
+    """One line per row whose interval of `measure` misses the paper's value: what each
+    measured change gives on that cell (module docstring)."""
+    out = []
+    for row in rows:
+        if row.inside(measure) is not False:
+            continue
+        iv = row.ours[measure]
+        assert iv is not None
+        tried = []
+        for other in rows:
+            if (other is not row and other.method == row.method and other.condition == row.condition
+                    and other.ours.get(measure) is not None):
+                tried.append((f"{row.method}@{other.version} ({other.weights})", other.ours[measure]))
+        for variant in variants:
+            found = variant.cell(row.method, row.version, row.condition)
+            if found is not None and found.get(measure) is not None:
+                tried.append((variant.label, found[measure]))
+        head = (f"{PAPER_NAMES[row.method]} @{row.version} ({row.weights}), {row.condition}: paper "
+                f"{row.paper:.1f}, ours {iv.format(100.0)}")
+        if not tried:
+            out.append(f"{head}; no change measured on this cell: unexplained.")
+            continue
+        found_any = [label for label, v in tried if _holds(row.paper, v)]
+        said = "; ".join(f"{label}: {v.format(100.0) if v else 'n/a'}"
+                         f"{' (holds it)' if _holds(row.paper, v) else ''}" for label, v in tried)
+        verdict = (f"brought onto the paper's value by {' / '.join(found_any)}" if found_any
+                   else "no measured change brings it onto the paper's value")
+        out.append(f"{head}; {verdict}. Measured: {said}.")
+    return out
+
+
+#: The paper's order, best first.
+PAPER_ORDER = ("stable_afl", "bigan", "sad")
+
+
+def orders(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> list[str]:
+    """Per pair of the paper's methods (each method's rows of one version and weights), in how
+    many conditions the paper's order holds, is tied (intervals overlap) or is reversed."""
+    groups: dict[tuple[str, str, str], dict[str, Interval]] = {}
+    for row in rows:
+        iv = row.ours.get(measure)
+        if iv is not None and iv.low == iv.low:
+            groups.setdefault((row.method, row.version, row.weights), {})[row.condition] = iv
+    out = []
+    for i, upper in enumerate(PAPER_ORDER):
+        for lower in PAPER_ORDER[i + 1:]:
+            for ku, a in ((k, g) for k, g in groups.items() if k[0] == upper):
+                for kl, b in ((k, g) for k, g in groups.items() if k[0] == lower):
+                    shared = [c for c in CONDITIONS if c in a and c in b]
+                    if not shared:
+                        continue
+                    holds = sum(a[c].low > b[c].high for c in shared)
+                    reversed_ = sum(b[c].low > a[c].high for c in shared)
+                    out.append(f"{PAPER_NAMES[upper]} @{ku[1]} ({ku[2]}) above {PAPER_NAMES[lower]} "
+                               f"@{kl[1]} ({kl[2]}), as the paper orders them: {holds} of {len(shared)} "
+                               f"conditions; tied {len(shared) - holds - reversed_}; reversed {reversed_}.")
+    return out
 
 
 TITLE = "Table II side by side: the paper's recall at 100 % precision against ours on real KITTI 00"
@@ -122,7 +279,7 @@ INTRO = ("Real KITTI 00 top views (`bev-paper`), the authors' paper-era presets:
 
 def header() -> list[str]:
     """The column titles, shared by the Markdown table and the site's page."""
-    out = ["Method", "Version", "Condition", "Paper", "Seeds"]
+    out = ["Method", "Version", "Condition", "Paper", "Seeds", "Weights"]
     for _, title in MEASURES:
         out += [title, "inside"]
     return out
@@ -131,7 +288,7 @@ def header() -> list[str]:
 def cells(row: Row) -> list[str]:
     """One row's cells as text ('yes' / 'no' / 'n/a' for inside), in `header()`'s order."""
     out = [PAPER_NAMES[row.method], row.version, row.condition, f"{row.paper:.1f}",
-           ",".join(map(str, row.seeds)) or "none"]
+           ",".join(map(str, row.seeds)) or "none", row.weights]
     for measure, _ in MEASURES:
         iv = row.ours.get(measure)
         inside = row.inside(measure)
@@ -140,7 +297,7 @@ def cells(row: Row) -> list[str]:
     return out
 
 
-def markdown(rows: Sequence[Row], level: int = 1) -> str:
+def markdown(rows: Sequence[Row], level: int = 1, variants: Sequence[Variant] = ()) -> str:
     """The side-by-side table in Markdown, with how to read it; '' when there are no rows."""
     if not rows:
         return ""
@@ -153,6 +310,16 @@ def markdown(rows: Sequence[Row], level: int = 1) -> str:
         lines.append("| " + " | ".join(text) + " |")
     lines.append("")
     lines.extend(f"- {line}" for line in summary(rows))
+    order = orders(rows)
+    if order:
+        lines += ["", f"{'#' * (level + 1)} The paper's order (Stable-AFL > BiGAN > SAD), our measure", ""]
+        lines.extend(f"- {line}" for line in order)
+    why = causes(rows, variants)
+    if why:
+        lines += ["", f"{'#' * (level + 1)} What each cell outside its interval gives under the changes measured", ""]
+        lines += [f"- **{v.label}** (`{v.name}`): {v.about}" for v in variants if v.about]
+        lines += [""] if any(v.about for v in variants) else []
+        lines.extend(f"- {line}" for line in why)
     return "\n".join(lines) + "\n"
 
 
@@ -169,13 +336,13 @@ def summary(rows: Sequence[Row]) -> list[str]:
 
 def csv(rows: Sequence[Row]) -> str:
     """The same cells as CSV (fractions as percentages, one line per cell)."""
-    header = ["method", "version", "condition", "paper", "seeds"]
+    header = ["method", "version", "condition", "paper", "seeds", "weights"]
     for measure, _ in MEASURES:
         header += [measure, f"{measure}_low", f"{measure}_high", f"{measure}_paper_inside"]
     lines = [",".join(header)]
     for row in rows:
         cells = [row.method, row.version, row.condition, f"{row.paper:.1f}",
-                 " ".join(map(str, row.seeds))]
+                 " ".join(map(str, row.seeds)), '"' + row.weights.replace('"', "'") + '"']
         for measure, _ in MEASURES:
             iv = row.ours.get(measure)
             if iv is None:
