@@ -259,9 +259,11 @@ def orders(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> list[str]:
                         continue
                     holds = sum(a[c].low > b[c].high for c in shared)
                     reversed_ = sum(b[c].low > a[c].high for c in shared)
-                    out.append(f"{PAPER_NAMES[upper]} @{ku[1]} ({ku[2]}) above {PAPER_NAMES[lower]} "
+                    line = (f"{PAPER_NAMES[upper]} @{ku[1]} ({ku[2]}) above {PAPER_NAMES[lower]} "
                                f"@{kl[1]} ({kl[2]}), as the paper orders them: {holds} of {len(shared)} "
                                f"conditions; tied {len(shared) - holds - reversed_}; reversed {reversed_}.")
+                    if line not in out:
+                        out.append(line)
     return out
 
 
