@@ -59,7 +59,7 @@ def test_trained_network_beats_its_untrained_encoder(small_benchmark: Path, name
     try:
         maps, _ = load_training_maps(kitti_source(small_benchmark), ["01"], 1, False)
         task = tasks.make(TASK, progress=False)
-        cls = method_class(f"{name}@1")  # the version these settings are of
+        cls = method_class(name if "@" in name else f"{name}@1")  # the version these settings are of
         for seed in (0, 1):
             untrained = _single_frame_auc(cls(seed=seed, epochs=EPOCHS[name], **NETS), task)
             trained = _single_frame_auc(cls(seed=seed, epochs=EPOCHS[name], **NETS).fit(maps), task)
