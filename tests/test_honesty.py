@@ -85,6 +85,6 @@ def test_shipped_weights_beat_the_untrained_network_on_the_default(name: str) ->
     from safl_bench.method_registry import make_method
 
     task = tasks.make("SAFL/Synth00-T1R1-v4", progress=False)
-    shipped = _single_frame_auc(make_method(f"{name}@1", source="synth"), task)  # @2 ships no synthetic weights
-    untrained = _single_frame_auc(make_method(f"{name}@1", weights="untrained", source="synth"), task)
+    shipped = _single_frame_auc(make_method(name, source="synth"), task)  # @2 ships no synthetic weights
+    untrained = _single_frame_auc(make_method(name, weights="untrained", source="synth"), task)
     assert shipped > untrained + 0.05, (shipped, untrained)
