@@ -356,7 +356,13 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
 
     presets, bad = load_preset_records(REPO_BOARD)
     assert bad == []
-    build_leaderboard(records, tmp_path, figures=False, preset_records=presets)
+    from safl_bench.leaderboard import table2
+    from safl_bench.results.records import load_records
+
+    variants, _ = table2.load_variants(REPO_BOARD / "experiments" / "table2")
+    selected, _ = load_records(REPO_BOARD / "selected-records")
+    build_leaderboard(records, tmp_path, figures=False, preset_records=presets,
+                      selected_records=selected, table2_variants=variants)
     _committed(tmp_path, ("tables",))
 
 
