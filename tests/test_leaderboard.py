@@ -357,7 +357,6 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
     presets, bad = load_preset_records(REPO_BOARD)
     assert bad == []
     from safl_bench.leaderboard import table2
-    from safl_bench.results.records import load_records
 
     variants, _ = table2.load_variants(REPO_BOARD / "experiments" / "table2")
     selected, _ = load_records(REPO_BOARD / "selected-records")
