@@ -53,24 +53,17 @@ where theirs writes three (module.py:148-149), which could also draw colour.
 from __future__ import annotations
 
 import itertools
-import math
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from baselines.nets import levels
 from safl_bench.errors import ConfigError
 
 TEST_STATS = ("image", "running")
 BN_EPS = 1e-5
 KEEP = 0.8
-
-
-def _levels(image_size: int) -> int:
-    levels = round(math.log2(image_size / 4)) if image_size >= 8 else 0
-    if levels < 1 or 4 * 2**levels != image_size:
-        raise ConfigError(f"image_size must be a power of two >= 8, got {image_size!r}")
-    return levels
 
 
 class _SameConv(nn.Module):
@@ -106,7 +99,7 @@ class _Trunk(nn.Module):
         if test_stats not in TEST_STATS:
             raise ConfigError(f"test_stats must be one of {TEST_STATS}, got {test_stats!r}")
         self.test_stats = test_stats
-        channels = [1] + [width * 2**i for i in range(_levels(image_size))]
+        channels = [1] + [width * 2**i for i in range(levels(image_size))]
         self.convs = nn.ModuleList(_SameConv(a, b) for a, b in itertools.pairwise(channels))
         self.norms: list[nn.BatchNorm2d] = nn.ModuleList(  # type: ignore[assignment]
             nn.BatchNorm2d(c, eps=BN_EPS) for c in channels[1:])
@@ -141,12 +134,12 @@ class AuthorsDecoder(nn.Module):
 
     def __init__(self, image_size: int = 64, code_size: int = 512, width: int = 64):
         super().__init__()
-        levels = _levels(image_size)
-        self.channels = width * 2 ** (levels - 1)
+        depth = levels(image_size)
+        self.channels = width * 2 ** (depth - 1)
         self.head = nn.Linear(code_size, self.channels * 16)
         layers: list[nn.Module] = [nn.BatchNorm2d(self.channels, eps=BN_EPS), nn.ReLU()]
         c = self.channels
-        for _ in range(levels - 1):
+        for _ in range(depth - 1):
             layers += [_SameDeconv(c, c // 2), nn.BatchNorm2d(c // 2, eps=BN_EPS), nn.ReLU()]
             c //= 2
         layers += [_SameDeconv(c, 1), nn.Tanh()]

@@ -27,19 +27,19 @@ from torch import nn
 from safl_bench.errors import ConfigError
 
 
-def _levels(image_size: int) -> int:
+def levels(image_size: int) -> int:
     """Number of stride-2 stages from image_size down to 4x4."""
-    levels = round(math.log2(image_size / 4)) if image_size >= 8 else 0
-    if levels < 1 or 4 * 2**levels != image_size:
+    n = round(math.log2(image_size / 4)) if image_size >= 8 else 0
+    if n < 1 or 4 * 2**n != image_size:
         raise ConfigError(f"image_size must be a power of two >= 8, got {image_size!r}")
-    return levels
+    return n
 
 
 def _trunk(image_size: int, width: int, batch_norm: bool) -> tuple[nn.Sequential, int]:
     """Strided conv stack (N,1,S,S) -> (N, C, 4, 4); returns it and C."""
     layers: list[nn.Module] = []
     c_in, c_out = 1, width
-    for i in range(_levels(image_size)):
+    for i in range(levels(image_size)):
         layers.append(nn.Conv2d(c_in, c_out, 4, 2, 1, bias=not (batch_norm and i > 0)))
         if batch_norm and i > 0:
             layers.append(nn.BatchNorm2d(c_out))
@@ -65,12 +65,12 @@ class Decoder(nn.Module):
 
     def __init__(self, image_size: int = 64, code_size: int = 1024, width: int = 32):
         super().__init__()
-        levels = _levels(image_size)
-        channels = width * 2 ** (levels - 1)
+        depth = levels(image_size)
+        channels = width * 2 ** (depth - 1)
         self.channels = channels
         self.head = nn.Linear(code_size, channels * 16, bias=False)
         layers: list[nn.Module] = [nn.BatchNorm2d(channels), nn.ReLU(inplace=True)]
-        for _ in range(levels - 1):
+        for _ in range(depth - 1):
             layers += [
                 nn.ConvTranspose2d(channels, channels // 2, 4, 2, 1, bias=False),
                 nn.BatchNorm2d(channels // 2),

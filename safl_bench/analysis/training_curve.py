@@ -113,8 +113,10 @@ def measure_curve(
     if not task_ids:
         raise ConfigError("no tasks to draw the curve on")
     points: list[CurvePoint] = []
+    trained_source: str | None = None
     for shot in shots:
         method = Method.load(shot.path)
+        trained_source = trained_source or ((method.weights_info or {}).get("trained_on") or {}).get("source")
         options = RunOptions(results_dir=out / "records" / f"step{shot.step:06d}", seed=seed,
                              bev_root=bev_root, kitti_root=kitti_root, evaluation=evaluation,
                              timing_frames=5, timing_repeats=1, progress=False)
@@ -128,8 +130,7 @@ def measure_curve(
             point.auc[condition] = float("nan") if auc is None else auc
         points.append(point)
         log(f"step {shot.step}: " + ", ".join(f"{c} {v:.3f}" for c, v in point.auc.items()))
-    first = Method.load(shots[0].path).weights_info or {}
-    label = source_label or (first.get("trained_on") or {}).get("source") or run_info(run_dir).get("data", {}).get("source")
+    label = source_label or trained_source or run_info(run_dir).get("data", {}).get("source")
     lines = [json.dumps({"iteration": p.step, "val_auc": p.auc, "val_tasks": list(task_ids),
                          "source": label, "measured_on": measured_on, "seed": seed},
                         sort_keys=True) for p in points]
