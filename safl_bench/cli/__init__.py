@@ -29,6 +29,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
         "loops": ("data_loops", "export ground-truth loop pairs of a KITTI poses file as CSV"),
         "export": ("data_export", "write a scan sequence's top views as images in BEVPlace's layout"),
         "fidelity": ("data_fidelity", "compare the synthetic default with real top-view images: statistics, curves, rankings"),
+        "resampling": ("data_resampling", "resampled queries (empty corners) against re-rendered ones, paired, per method and condition"),
     },
     "list": {
         "tasks": ("list_tasks", "list the registered benchmark tasks"),

@@ -9,7 +9,7 @@ viewpoint. Choices, and why:
   (a count image stays a count image; interpolation would blur every query but no database
   image). What the moved view sees beyond the original image is empty (0): a 20 m shift of a
   60.4 m wide view leaves up to a third of it empty along an axis, and rotations empty the
-  corners (`coverage` measures it).
+  corners (`coverage` measures it, `coverage_masks` shows where).
 - `fit_input` gives a method its declared input size (`Method.input_size`) by bilinear
   interpolation with antialiasing (area-like when shrinking, smooth when enlarging), so a
   64 x 64 network runs on 151 x 151 images; the runner records the sizes.
@@ -51,10 +51,16 @@ def move_viewpoint(images: np.ndarray, offsets: np.ndarray, resolution_m: float)
     return out
 
 
+def coverage_masks(size: int, offsets: np.ndarray, resolution_m: float) -> np.ndarray:
+    """(N, size, size) uint8: 1 where each moved view still sees the original image, 0 where
+    `move_viewpoint` leaves it empty."""
+    ones = np.ones((len(offsets), size, size), dtype=np.uint8)
+    return move_viewpoint(ones, offsets, resolution_m)
+
+
 def coverage(size: int, offsets: np.ndarray, resolution_m: float) -> np.ndarray:
     """(N,) fraction of each moved view that still lies inside the original image."""
-    ones = np.ones((len(offsets), size, size), dtype=np.uint8)
-    return move_viewpoint(ones, offsets, resolution_m).mean(axis=(1, 2))
+    return coverage_masks(size, offsets, resolution_m).mean(axis=(1, 2))
 
 
 def fit_input(maps: np.ndarray, size: int | None) -> np.ndarray:
