@@ -139,16 +139,15 @@ def cell_key(method: Method, task: Task, arm: str, evaluation: EvaluationConfig)
 
 
 def _save_outcomes(path: Path, per_mode: dict[str, Outcomes]) -> None:
-    arrays: dict[str, np.ndarray] = {}
+    arrays: dict[str, Any] = {}  # Any: numpy's stub reads **kwargs as allow_pickle
     for mode, o in per_mode.items():
         for name in ("confidence", "label", "has_true_place", "has_candidate", "true_rank"):
             value = getattr(o, name)
             if value is not None:
                 arrays[f"{mode}.{name}"] = value
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 def _load_outcomes(path: Path) -> dict[str, Outcomes] | None:
