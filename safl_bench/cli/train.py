@@ -219,6 +219,8 @@ def main(args: argparse.Namespace) -> int:
           file=sys.stderr)
     method.fit(maps, checkpoint_dir=out, callback=callback, progress=progress,
                checkpoint_every=args.snapshot_every, step_callback=step_callback)
+    if method.iterations is not None:  # the training steps the weights hold (Table II's Weights column)
+        trained_on = {**trained_on, "steps": method.iterations}
     method.save(out / "model.safetensors", parts=("encoder", "decoder"), trained_on=trained_on)
     method.save(out / f"{cls.name}.safetensors", parts=("encoder",), trained_on=trained_on)
     save_reconstructions(method, maps, out / "reconstructions.png")
