@@ -95,7 +95,8 @@ def test_settings_record_and_read_back() -> None:
     cfg = EvaluationConfig(MatcherConfig(ds=3), max_frames=7, trim_queries=2)
     d = cfg.to_dict()
     assert list(d) == ["sequence", "single_frame", "evaluation"]
-    assert d["evaluation"] == {"max_frames": 7, "trim_queries": 2, "distance": "method"}
+    assert d["evaluation"] == {"max_frames": 7, "trim_queries": 2, "distance": "method",
+                               "truth_at": "frame"}
     assert d["sequence"] == MatcherConfig(ds=3).to_dict()
     assert d["single_frame"] == cfg.single_frame.to_dict()
     assert EvaluationConfig.from_dict(d) == cfg
@@ -108,7 +109,7 @@ def test_settings_record_and_read_back() -> None:
     for bad in ({"sequence": {}, "evaluation": {"max_frames": 1, "other": 0}},
                 {"sequence": {}, "evaluation": [1]}):
         with pytest.raises(ConfigError, match=r"^evaluation settings: expected keys of "
-                                              r"\['max_frames', 'trim_queries', 'distance'\], got "):
+                                              r"\['max_frames', 'trim_queries', 'distance', 'truth_at'\], got "):
             EvaluationConfig.from_dict(bad)  # type: ignore[arg-type]
 
 

@@ -440,3 +440,42 @@ def test_table_ii_side_by_side_reads_the_authors_presets_and_says_which_cells_ho
     assert "| BiGAN |" not in md and "not run" in md
     page = (tmp_path / "lb/site/kitti-top-view-images-paper-00-v0.html").read_text()
     assert '<section class="table2"' in page and "<td>28.3</td>" in page
+
+
+def test_table_ii_readme_block_is_the_papers_layout_with_ours_under_it(tmp_path) -> None:
+    """The README's Table II block: the paper's row, then ours (mean [interval]) per version,
+    bold where the paper's value lies outside; rewritten between its markers only."""
+    from dataclasses import replace
+
+    from safl_bench.errors import DataError
+    from safl_bench.leaderboard import table2
+    from safl_bench.leaderboard.readme import replace_block
+    from safl_bench.matching.presets import configure
+
+    def record(method: str, preset: str, seed: int, skill: float) -> object:
+        base = scored_record(method, seed=seed, skill=skill, condition="T1R1", source_kind="bev",
+                             source_label="KITTI top-view images")
+        return replace(base, matcher=configure(preset).to_dict())
+
+    rows = table2.side_by_side([record("sad", "authors-sad", s, 0.99) for s in range(3)])
+    sad = next(r for r in rows if r.condition == "T1R1")
+    lines = table2.grid(rows).splitlines()
+    assert lines[0] == "| Method | Version | Weights | " + " | ".join(table2.CONDITIONS) + " |"
+    assert lines[2].startswith("| SAD | paper | | 28.3 | 44.5 |")
+    ours = lines[3].split(" | ")
+    iv = sad.ours["recall_at_100_precision"]
+    assert iv is not None
+    expected = iv.format(100.0)
+    assert ours[3] == (f"**{expected}**" if sad.inside("recall_at_100_precision") is False else expected)
+    assert ours[4] == "—"  # T5R1 not run
+    assert "| BiGAN | paper |" in table2.grid(rows)  # the paper's rows stand without ours
+    block = table2.readme_block(rows, "[the table](x.md)")
+    assert block.startswith(table2.README_START) and block.endswith(table2.README_END)
+    readme = tmp_path / "README.md"
+    readme.write_text(f"before\n{table2.README_START}\nold\n{table2.README_END}\nafter\n")
+    assert replace_block(readme, table2.README_START, table2.README_END, block, "Table II")
+    assert readme.read_text() == f"before\n{block}\nafter\n"
+    assert not replace_block(readme, table2.README_START, table2.README_END, block, "Table II")
+    readme.write_text(f"{table2.README_END}\n{table2.README_START}\n")
+    with pytest.raises(DataError, match="Table II markers"):
+        replace_block(readme, table2.README_START, table2.README_END, block, "Table II")

@@ -52,7 +52,8 @@ def test_paper_preset_is_the_old_defaults() -> None:
     assert {k: recorded["sequence"][k] for k in OLD_DEFAULTS} == OLD_DEFAULTS
     assert {k: recorded["single_frame"][k] for k in OLD_SINGLE} == OLD_SINGLE
     assert recorded["sequence"]["preset"] == "paper"
-    assert recorded["evaluation"] == {"max_frames": None, "trim_queries": 0, "distance": "method"}
+    assert recorded["evaluation"] == {"max_frames": None, "trim_queries": 0, "distance": "method",
+                                      "truth_at": "frame"}
     assert paper.sequence.velocities().tolist() == [0.8, 0.9, 1.0, 1.1]
 
 
@@ -315,7 +316,7 @@ def test_cli_preset_refined_by_matcher_records_both(tiny_task, kitti_root, tmp_p
     assert (seq["preset"], seq["enhance_window"], seq["ds"]) == ("authors", 0, 4)
     assert (seq["score"], seq["shift"], seq["capped_match"]) == ("inverse", False, 1)
     assert record["matcher"]["evaluation"] == {"max_frames": 300, "trim_queries": 2,
-                                               "distance": "euclidean"}
+                                               "distance": "euclidean", "truth_at": "frame"}
     assert matcher_presets.label(record["matcher"]) == "authors+ds=4,enhance_window=0,trim_queries=2"
     assert record["results"]["sequence"]["metrics"]["n_queries"] == 12 - 4
     # --score refines a preset only when given: openseqslam keeps its ratio
@@ -355,3 +356,18 @@ def test_euclidean_distance_is_the_plain_l2_norm() -> None:
     np.testing.assert_allclose(D2, want ** 2, rtol=1e-4, atol=1e-5)
     with pytest.raises(ConfigError, match="distance must be one of"):
         EvaluationConfig(distance="cosine")
+
+
+def test_truth_at_is_an_evaluation_setting_that_old_records_read_as_frame() -> None:
+    """`--matcher truth_at=viewpoint` is recorded and labelled; a record made before the setting
+    existed was scored against the frames' poses, and reads so; a wrong value is one line."""
+    want = matcher_presets.configure("authors", {"truth_at": "viewpoint"})
+    assert want.truth_at == "viewpoint" and want.to_dict()["evaluation"]["truth_at"] == "viewpoint"
+    assert matcher_presets.label(want) == "authors+truth_at=viewpoint"
+    before = matcher_presets.configure("authors").to_dict()
+    del before["evaluation"]["truth_at"]
+    assert same_settings(before, matcher_presets.configure("authors").to_dict())
+    assert not same_settings(before, want.to_dict())
+    with pytest.raises(ConfigError, match="truth_at must be one of"):
+        matcher_presets.configure("authors", {"truth_at": "pose"})
+    assert all("truth_at" in p.citations for p in matcher_presets.PRESETS.values())

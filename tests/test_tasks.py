@@ -433,3 +433,28 @@ def test_import_registers_tasks_without_loading_data() -> None:
         "assert not heavy, heavy"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
+
+
+def test_truth_at_viewpoint_measures_true_places_from_the_noisy_viewpoint(temp_register) -> None:
+    """`Task.truth_for`: with truth_at=viewpoint a query's true places lie around the viewpoint
+    its view was made at (its frame's pose moved by its offset in the robot frame); the default
+    keeps the frames' poses; a task without headings says it cannot."""
+    from safl_bench.matching.settings import EvaluationConfig
+    from safl_bench.tasks.task import Task
+
+    spec = temp_register("Test/TruthAt-T20R1-v0", source="synth", sequence="00", condition="T20R1",
+                         map_config=TINY_MAP)
+    n = 40
+    positions = np.column_stack([np.arange(n) * 2.0, np.zeros(n)])  # a straight road along x
+    headings = np.full(n, np.pi / 2)  # driving along +y in the robot frame's terms: x forward is world +y
+    task = Task(spec, positions=positions, times=np.arange(n) * 0.1, headings=headings)
+    assert task.truth_for(EvaluationConfig()) is task.truth
+    moved = task.truth_for(EvaluationConfig(truth_at="viewpoint"))
+    dx, dy = task.query_offsets[:, 0], task.query_offsets[:, 1]
+    expected = task.query_positions + np.column_stack([-dy, dx])  # rotated by +90 degrees
+    np.testing.assert_allclose(moved.query_positions, expected, atol=1e-9)
+    np.testing.assert_array_equal(moved.database_positions, task.truth.database_positions)
+    assert not np.allclose(moved.query_positions, task.query_positions)
+    bare = Task(spec, positions=positions, times=np.arange(n) * 0.1)
+    with pytest.raises(ConfigError, match="truth_at=viewpoint needs the frames' headings"):
+        bare.truth_for(EvaluationConfig(truth_at="viewpoint"))

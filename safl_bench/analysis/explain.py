@@ -152,7 +152,7 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     task = _task(registered, seed, options, options.progress, described)
     kind = described.input_kind
     task.prepare(list(dict.fromkeys([kind, "topview"])))
-    queries, database, truth = task.queries(kind), task.database(kind), task.truth
+    queries, database, truth = task.queries(kind), task.database(kind), task.truth_for(config)
     q_top, db_top = task.queries("topview"), task.database("topview")
     if config.max_frames is not None:
         n = config.max_frames

@@ -243,7 +243,8 @@ def run(experiment: Experiment, methods: Callable[[str], Sequence[Method]], cell
                     if found is None:
                         found = evaluate_method(
                             method, method_input(method, arms[arm]),
-                            method_input(method, task.database(method.input_kind)), task.truth,
+                            method_input(method, task.database(method.input_kind)),
+                            task.truth_for(experiment.evaluation),
                             config=experiment.evaluation, memo=memo).outcomes
                         _save_outcomes(path, found)
                     outcomes[i][arm].append(found[experiment.mode])

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from safl_bench.leaderboard import build_leaderboard, table2
 from safl_bench.leaderboard.headline import update_readme
+from safl_bench.leaderboard.readme import replace_block
 from safl_bench.matching.presets import label
 from safl_bench.results.records import Problem, ResultRecord, load_records
 
@@ -132,9 +133,15 @@ def main(args: argparse.Namespace) -> int:
     if not args.no_site:
         print(f"site: {out / 'site' / 'index.html'}")
     readme = out.parent / "README.md"
-    if report.headline is not None and out.resolve() == default_out_dir().resolve() and readme.is_file():
-        if update_readme(readme, report.headline, report.headline_records):
+    if out.resolve() == default_out_dir().resolve() and readme.is_file():
+        if report.headline is not None and update_readme(readme, report.headline, report.headline_records):
             print(f"README headline: {readme}")
+        if report.table2:
+            side, rel = report.table2[min(report.table2)]
+            link = f"[{rel}](leaderboard/{rel})"
+            block = table2.readme_block(side, link)
+            if replace_block(readme, table2.README_START, table2.README_END, block, "Table II"):
+                print(f"README Table II: {readme}")
     # built from the other records; a record that is not valid (bad JSON, against the schema) is
     # an error the user has to fix, so the command says so in its status
     return 2 if any(problem.corrupt for problem in problems) else 0

@@ -3,7 +3,7 @@
 The headline (chosen by `report.headline_rank`) is read with four facts beside it, source,
 protocol, matcher preset and seeds, and one sentence on how to read recall at 100 % precision.
 `update_readme` rewrites the block between `README_START` and `README_END` in a README from the
-same table, so a regeneration keeps the README's numbers true.
+same table (`readme.replace_block`), so a regeneration keeps the README's numbers true.
 """
 
 from __future__ import annotations
@@ -11,11 +11,9 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections.abc import Sequence
-from pathlib import Path
 
-from safl_bench.common.atomic import atomic_write_text
-from safl_bench.errors import DataError
 from safl_bench.leaderboard.grouping import format_seeds
+from safl_bench.leaderboard.readme import replace_block
 from safl_bench.leaderboard.tables import Table
 from safl_bench.results.records import ResultRecord
 
@@ -81,15 +79,4 @@ def update_readme(readme: str | os.PathLike[str], table: Table, records: Sequenc
     A README without the markers is left alone; one with a start marker and no end marker (or
     the end before the start) is refused in one line naming the file.
     """
-    path = Path(readme)
-    text = path.read_text(encoding="utf-8")
-    start, end = text.find(README_START), text.find(README_END)
-    if start < 0 and end < 0:
-        return False
-    if start < 0 or end < start:
-        raise DataError(f"{path}: the headline markers {README_START} … {README_END} are not in order")
-    new = text[:start] + readme_block(table, records, link) + text[end + len(README_END):]
-    if new == text:
-        return False
-    atomic_write_text(path, new)
-    return True
+    return replace_block(readme, README_START, README_END, readme_block(table, records, link), "headline")

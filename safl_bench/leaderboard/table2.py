@@ -241,7 +241,25 @@ def causes(rows: Sequence[Row], variants: Sequence[Variant] = (), measure: str =
 PAPER_ORDER = ("stable_afl", "bigan", "sad")
 
 
-def orders(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> list[str]:
+@dataclass(frozen=True)
+class Order:
+    """How often the paper's order holds between two rows of methods (each a method, version and
+    weights) over the conditions both have: above beyond the noise, tied, below beyond it."""
+
+    upper: tuple[str, str, str]  # (method, version, weights) the paper puts above
+    lower: tuple[str, str, str]
+    holds: int
+    tied: int
+    reversed: int
+
+    def line(self) -> str:
+        (mu, vu, wu), (ml, vl, wl) = self.upper, self.lower
+        return (f"{PAPER_NAMES[mu]} @{vu} ({wu}) above {PAPER_NAMES[ml]} @{vl} ({wl}), as the paper "
+                f"orders them: {self.holds} of {self.holds + self.tied + self.reversed} conditions; "
+                f"tied {self.tied}; reversed {self.reversed}.")
+
+
+def order_counts(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> list[Order]:
     """Per pair of the paper's methods (each method's rows of one version and weights), in how
     many conditions the paper's order holds, is tied (intervals overlap) or is reversed."""
     groups: dict[tuple[str, str, str], dict[str, Interval]] = {}
@@ -259,11 +277,25 @@ def orders(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> list[str]:
                         continue
                     holds = sum(a[c].low > b[c].high for c in shared)
                     reversed_ = sum(b[c].low > a[c].high for c in shared)
-                    line = (f"{PAPER_NAMES[upper]} @{ku[1]} ({ku[2]}) above {PAPER_NAMES[lower]} "
-                               f"@{kl[1]} ({kl[2]}), as the paper orders them: {holds} of {len(shared)} "
-                               f"conditions; tied {len(shared) - holds - reversed_}; reversed {reversed_}.")
-                    if line not in out:
-                        out.append(line)
+                    order = Order(ku, kl, holds, len(shared) - holds - reversed_, reversed_)
+                    if order not in out:
+                        out.append(order)
+    return out
+
+
+def orders(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> list[str]:
+    """`order_counts` in words, one line per pair of rows."""
+    return [o.line() for o in order_counts(rows, measure)]
+
+
+def _order_table(rows: Sequence[Row]) -> list[str]:
+    """`order_counts` as a Markdown table (README)."""
+    def name(key: tuple[str, str, str]) -> str:
+        return f"{PAPER_NAMES[key[0]].split(' (')[0]} @{key[1]} ({key[2]})"
+
+    out = ["| The paper's order: above | below | holds | tied | reversed |", "|---|---|---:|---:|---:|"]
+    out += [f"| {name(o.upper)} | {name(o.lower)} | {o.holds} | {o.tied} | {o.reversed} |"
+            for o in order_counts(rows)]
     return out
 
 
@@ -323,6 +355,63 @@ def markdown(rows: Sequence[Row], level: int = 1, variants: Sequence[Variant] = 
         lines += [""] if any(v.about for v in variants) else []
         lines.extend(f"- {line}" for line in why)
     return "\n".join(lines) + "\n"
+
+
+README_START = "<!-- table2:start -->"
+README_END = "<!-- table2:end -->"
+
+
+def grid(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> str:
+    """Table II's own layout: one line per method with the paper's values, then one per version
+    and weights of ours (mean [95 % interval], one column per condition); a value of ours in
+    bold is one whose interval does not hold the paper's value."""
+    head = ["Method", "Version", "Weights", *CONDITIONS]
+    lines = ["| " + " | ".join(head) + " |", "|---|---|---|" + "---:|" * len(CONDITIONS)]
+    groups: dict[tuple[str, str, str], dict[str, Row]] = {}
+    for row in rows:
+        groups.setdefault((row.method, row.version, row.weights), {})[row.condition] = row
+    for name in PUBLISHED:
+        lines.append(f"| {PAPER_NAMES[name]} | paper | | "
+                     + " | ".join(f"{PUBLISHED[name][c]:.1f}" for c in CONDITIONS) + " |")
+        for (method, version, weights), by_condition in groups.items():
+            if method != name:
+                continue
+            values = []
+            for condition in CONDITIONS:
+                cell = by_condition.get(condition)
+                iv = cell.ours.get(measure) if cell is not None else None
+                text = iv.format(100.0) if iv is not None else "—"
+                values.append(f"**{text}**" if cell is not None and cell.inside(measure) is False else text)
+            lines.append(f"| {PAPER_NAMES[name]} | {version} | {weights} | " + " | ".join(values) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def readme_block(rows: Sequence[Row], link: str) -> str:
+    """The README's Table II block: the grid under our measure, the paper's order per pair, and
+    where every cell with both measures and the measured causes are (`link`)."""
+    lines = [
+        README_START,
+        "<!-- written by `safl-bench leaderboard` from the leaderboard's records; do not edit -->",
+        "",
+        "Table II (the paper's recall at 100 % precision) beside ours on real KITTI 00 top views "
+        "under the authors' paper-era presets (`authors`; SAD `authors-sad`), sequence matching: "
+        "mean over seeds [95 % interval over seeds and queries], recall over every query with a "
+        "true place. **Bold**: the paper's value lies outside our interval.",
+        "",
+        grid(rows).rstrip("\n"),
+        "",
+        *(f"- {line}" for line in summary(rows)),
+        "",
+        "The paper's order Stable-AFL > BiGAN > SAD, per pair of rows over the twelve conditions "
+        "(our measure; overlapping intervals are a tie):",
+        "",
+        *_order_table(rows),
+        "",
+        f"Both measures, cell by cell, and what each change measured does to every cell outside "
+        f"its interval: {link}.",
+        README_END,
+    ]
+    return "\n".join(lines)
 
 
 def summary(rows: Sequence[Row]) -> list[str]:

@@ -139,7 +139,16 @@ def _preset(name: str, description: str, citations: dict[str, str], max_frames: 
     return Preset(name, description, EvaluationConfig(MatcherConfig(preset=name, **matcher),
                                                       max_frames=max_frames,
                                                       trim_queries=trim_queries,
-                                                      distance=distance), citations)
+                                                      distance=distance),
+                  {"truth_at": _TRUTH_AT, **citations})
+
+
+#: Every preset measures true places from the frame's pose: the paper does not say, and the
+#: authors' scoring reads the test folder's own pose.txt (plotDraw_slfl.py:58-60, 113-117 at
+#: 25be0fd), written by a data generator that is not in their repository.
+_TRUTH_AT = ("paper §IV and the authors' code leave it open: their score reads the test "
+             "folder's pose.txt (src/plot/SLFL/plotDraw_slfl.py:58-60, 113-117@25be0fd), whose "
+             "generator is not in the repository; the frame's pose")
 
 
 _TM = "CNN-GAN/Top-Mapping "
@@ -307,6 +316,7 @@ SETTING_HELP: dict[str, str] = {
     "max_frames": "only the first N task frames, database and queries (null: all)",
     "trim_queries": "queries left out of the metrics at each end of the sequence",
     "distance": "descriptor difference: the method's own (method) or plain L2 (euclidean)",
+    "truth_at": "true places within the radius of the query frame's pose, or of its noisy viewpoint",
 }
 
 

@@ -2,9 +2,10 @@
 
 `EvaluationConfig` is what every record's ``matcher`` field holds and what a preset
 (`safl_bench.matching.presets`) names: the sequence matcher's `MatcherConfig` (the single-frame
-settings follow from it) and three evaluation-level settings that reproduce the authors' public
+settings follow from it) and evaluation-level settings that reproduce the authors' public
 code, all off by default (the paper's protocol): ``max_frames``, ``trim_queries`` and
-``distance`` (`safl_bench.evaluation.cell`'s docstring says what each does).
+``distance`` (`safl_bench.evaluation.cell`'s docstring says what each does), and ``truth_at``,
+where a noisy query's true places are measured from (`safl_bench.tasks.task.Task.truth_for`).
 It lives with the matcher, not with the evaluation that reads it, so that the presets need
 nothing of a later stage.
 """
@@ -22,10 +23,14 @@ MODES = ("sequence", "single_frame")
 
 
 #: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
-EVALUATION_SETTINGS = ("max_frames", "trim_queries", "distance")
+EVALUATION_SETTINGS = ("max_frames", "trim_queries", "distance", "truth_at")
 
 #: How descriptors may be compared (`EvaluationConfig.distance`).
 DISTANCES = ("method", "euclidean")
+
+#: Where a query's true places are measured from (`EvaluationConfig.truth_at`): the pose of its
+#: frame, or the noisy viewpoint its view was made at (the same for clean queries).
+TRUTH_AT = ("frame", "viewpoint")
 
 #: Presets renamed since records were made: a record whose matcher settings name the old name
 #: and lack the ``distance`` setting (every record made before it existed) was made with the
@@ -42,13 +47,16 @@ class EvaluationConfig:
     database AND queries (None: all). trim_queries: leave the first and the last N queries out
     of the metrics (they are still matched, and their trajectories use their neighbours).
     distance: "method" (the method's own difference) or "euclidean" (plain L2 between the
-    descriptors; module docstring).
+    descriptors; module docstring). truth_at: "frame" (a query's true places lie within the
+    radius of its frame's pose, the paper protocol's default) or "viewpoint" (of the noisy
+    viewpoint its view shows, `Task.truth_for`).
     """
 
     sequence: MatcherConfig = field(default_factory=MatcherConfig)
     max_frames: int | None = None
     trim_queries: int = 0
     distance: str = "method"
+    truth_at: str = "frame"
 
     def __post_init__(self) -> None:
         n = self.max_frames
@@ -59,6 +67,8 @@ class EvaluationConfig:
             raise ConfigError(f"trim_queries must be an integer >= 0, got {t!r}")
         if self.distance not in DISTANCES:
             raise ConfigError(f"distance must be one of {list(DISTANCES)}, got {self.distance!r}")
+        if self.truth_at not in TRUTH_AT:
+            raise ConfigError(f"truth_at must be one of {list(TRUTH_AT)}, got {self.truth_at!r}")
 
     @property
     def single_frame(self) -> MatcherConfig:

@@ -15,6 +15,7 @@ viewpoint noise simulates a different pass over the same place; it does not move
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +30,7 @@ from safl_bench.views.noise import CLEAN, sample_offsets
 
 if TYPE_CHECKING:
     from safl_bench.common.parallel import Parallel
+    from safl_bench.matching.settings import EvaluationConfig
     from safl_bench.sources import DataSource
 
 KINDS = ("topview", "points")
@@ -52,6 +54,7 @@ class Task:
         times: np.ndarray,
         source: DataSource | None = None,
         progress: bool = True,
+        headings: np.ndarray | None = None,
     ) -> None:
         positions = np.asarray(positions, dtype=np.float64)
         times = np.asarray(times, dtype=np.float64)
@@ -70,6 +73,10 @@ class Task:
         self.database_times = times[self.database_frames]
         self.query_times = times[self.query_frames]
         self.query_offsets = sample_offsets(len(self.query_frames), spec.condition, spec.seed)
+        #: (Nq,) heading of each query frame (rad), where the source has poses; None otherwise
+        self.query_headings = (None if headings is None
+                               else np.asarray(headings, dtype=np.float64)[self.query_frames])
+        self._viewpoint_truth: GroundTruth | None = None
         self.truth = GroundTruth(
             query_positions=self.query_positions,
             database_positions=self.database_positions,
@@ -123,9 +130,11 @@ class Task:
         try:
             sequence = source.sequence(spec.sequence)
             positions, times = sequence.positions, sequence.times
+            headings = getattr(sequence, "headings", None)
         except DataError as exc:
             raise DataError(f"task {spec.id}: {exc}") from None
-        return cls(spec, positions=positions, times=times, source=source, progress=progress)
+        return cls(spec, positions=positions, times=times, source=source, progress=progress,
+                   headings=headings)
 
     @classmethod
     def from_arrays(
@@ -146,6 +155,27 @@ class Task:
                 raise DataError(f"task {spec.id}: {len(views)} {role} views for {len(frames)} frames")
             task._views[role, kind] = views
         return task
+
+    def truth_for(self, evaluation: EvaluationConfig) -> GroundTruth:
+        """The ground truth an evaluation scores against (`EvaluationConfig.truth_at`):
+        ``frame``, `truth` (true places within the radius of each query frame's pose);
+        ``viewpoint``, the same with each query placed at the noisy viewpoint its view was made
+        at (the frame's pose moved by its `query_offsets` in the robot frame, as
+        `views.topview.noisy_viewpoints` moves the renderer). A noisy query whose view shows the
+        place 15 m ahead has its true places there, not at its frame. Which one the authors
+        scored with is not in their code (`matching.presets`' citation of ``truth_at``)."""
+        if evaluation.truth_at == "frame" or not self.query_offsets[:, :2].any():
+            return self.truth
+        if self.query_headings is None:
+            raise ConfigError(f"task {self.id}: truth_at=viewpoint needs the frames' headings, "
+                              "which this task's data does not have (a task built from arrays)")
+        if self._viewpoint_truth is None:
+            from safl_bench.views.topview import noisy_viewpoints
+
+            frames = np.column_stack([self.query_positions, self.query_headings])
+            moved = noisy_viewpoints(frames, self.query_offsets)[:, :2]
+            self._viewpoint_truth = dataclasses.replace(self.truth, query_positions=moved)
+        return self._viewpoint_truth
 
     @property
     def id(self) -> str:
