@@ -360,9 +360,17 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
 
     variants, _ = table2.load_variants(REPO_BOARD / "experiments" / "table2")
     selected, _ = load_records(REPO_BOARD / "selected-records")
-    build_leaderboard(records, tmp_path, figures=False, preset_records=presets,
-                      selected_records=selected, table2_variants=variants)
+    report = build_leaderboard(records, tmp_path, figures=False, preset_records=presets,
+                               selected_records=selected, table2_variants=variants)
     _committed(tmp_path, ("tables",))
+    # the README's generated blocks are what the same records give (`safl-bench leaderboard`)
+    from safl_bench.leaderboard.headline import README_LINK, readme_block
+
+    readme = (REPO_BOARD.parent / "README.md").read_text(encoding="utf-8")
+    assert report.headline is not None
+    assert readme_block(report.headline, report.headline_records, README_LINK) in readme
+    side, rel = report.table2[min(report.table2)]
+    assert table2.readme_block(side, rel) in readme
 
 
 @pytest.mark.slow
@@ -469,7 +477,8 @@ def test_table_ii_readme_block_is_the_papers_layout_with_ours_under_it(tmp_path)
     assert ours[3] == (f"**{expected}**" if sad.inside("recall_at_100_precision") is False else expected)
     assert ours[4] == "—"  # T5R1 not run
     assert "| BiGAN | paper |" in table2.grid(rows)  # the paper's rows stand without ours
-    block = table2.readme_block(rows, "[the table](x.md)")
+    block = table2.readme_block(rows, "tables/x.md")
+    assert "[tables/x.md](leaderboard/tables/x.md)" in block
     assert block.startswith(table2.README_START) and block.endswith(table2.README_END)
     readme = tmp_path / "README.md"
     readme.write_text(f"before\n{table2.README_START}\nold\n{table2.README_END}\nafter\n")

@@ -138,8 +138,7 @@ def main(args: argparse.Namespace) -> int:
             print(f"README headline: {readme}")
         if report.table2:
             side, rel = report.table2[min(report.table2)]
-            link = f"[{rel}](leaderboard/{rel})"
-            block = table2.readme_block(side, link)
+            block = table2.readme_block(side, rel)
             if replace_block(readme, table2.README_START, table2.README_END, block, "Table II"):
                 print(f"README Table II: {readme}")
     # built from the other records; a record that is not valid (bad JSON, against the schema) is

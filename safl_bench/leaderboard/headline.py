@@ -27,6 +27,10 @@ READING = (
     "matches that set a zero."
 )
 
+#: Where the README's headline block sends a reader for every table.
+README_LINK = ("`leaderboard/site/index.html` (open it from disk) and "
+               "[leaderboard/index.md](leaderboard/index.md)")
+
 README_START = "<!-- headline:start -->"
 README_END = "<!-- headline:end -->"
 
@@ -72,8 +76,7 @@ def readme_block(table: Table, records: Sequence[ResultRecord], link: str) -> st
 
 
 def update_readme(readme: str | os.PathLike[str], table: Table, records: Sequence[ResultRecord],
-                  link: str = "`leaderboard/site/index.html` (open it from disk) and "
-                              "[leaderboard/index.md](leaderboard/index.md)") -> bool:
+                  link: str = README_LINK) -> bool:
     """Rewrite the headline block of `readme` if it has the markers; True when the file changed.
 
     A README without the markers is left alone; one with a start marker and no end marker (or

@@ -386,9 +386,11 @@ def grid(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def readme_block(rows: Sequence[Row], link: str) -> str:
+def readme_block(rows: Sequence[Row], table: str) -> str:
     """The README's Table II block: the grid under our measure, the paper's order per pair, and
-    where every cell with both measures and the measured causes are (`link`)."""
+    a link to the side-by-side table (`table`: its path inside the leaderboard folder), where
+    every cell has both measures and the measured causes."""
+    link = f"[{table}](leaderboard/{table})"
     lines = [
         README_START,
         "<!-- written by `safl-bench leaderboard` from the leaderboard's records; do not edit -->",

@@ -223,7 +223,8 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
     try:
         evaluation = evaluate_method(
             method, method_input(method, queries), method_input(method, database),
-            task.truth_for(options.evaluation), config=options.evaluation, revisit=task.spec.protocol == "revisit", memo=memo,
+            task.truth_for(options.evaluation), config=options.evaluation,
+            revisit=task.spec.protocol == "revisit", memo=memo,
         )
     except NoPositivesError as exc:
         raise NoPositivesError(f"task {registered.id} (seed {task.spec.seed}): {exc}; its "
