@@ -207,6 +207,33 @@ def test_move_viewpoint_matches_the_renderers_offsets() -> None:
     assert coverage(20, np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0]]), 0.4).tolist() == [1.0, 0.5]
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32])
+def test_move_viewpoint_is_bit_identical_to_scipys_per_image_transform(dtype) -> None:
+    """The stacked kernel reproduces scipy's affine_transform(order=0, constant 0) image by image,
+    so queries (and records) made with the per-image loop are made again exactly."""
+    from scipy.ndimage import affine_transform
+
+    from safl_bench.views.resample import _affine
+
+    rng = np.random.default_rng(3)
+    n, size = 64, 31
+    images = rng.integers(1, 256, (n, size, size)).astype(dtype)
+    offsets = np.c_[rng.uniform(-8.0, 8.0, (n, 2)), rng.uniform(-np.pi, np.pi, n)]
+    offsets[:4] = 0.0  # no move
+    offsets[4:8, 2] = [np.pi / 2, -np.pi / 2, np.pi, 0.0]  # exact turns, pixel-grid points
+    offsets[8:12, :2] = np.round(offsets[8:12, :2] / 0.4) * 0.4  # whole-pixel shifts
+    expected = np.empty_like(images)
+    for i in range(n):
+        matrix, shift = _affine(size, offsets[i], 0.4)
+        affine_transform(images[i], matrix, offset=shift, output=expected[i], order=0,
+                         mode="constant", cval=0)
+    moved = move_viewpoint(images, offsets, 0.4)
+    assert moved.dtype == images.dtype
+    np.testing.assert_array_equal(moved, expected)
+    assert (moved == 0).any() and (moved != 0).any()
+    assert move_viewpoint(images[:0], offsets[:0], 0.4).shape == (0, size, size)
+
+
 def test_fit_input_resamples_only_other_sizes() -> None:
     maps = np.random.default_rng(0).random((3, 151, 151)).astype(np.float32)
     assert fit_input(maps, None) is maps and fit_input(maps, 151) is maps
