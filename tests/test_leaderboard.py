@@ -83,7 +83,28 @@ def test_auc_and_time_tables() -> None:
         "| sad | 1 | 3.20 | — |",
         "| stable_afl | 1 | 16.10 | 15.80 |",
     ]
-    assert any("Test CPU (2 cores)" in note for note in timing.notes)
+    assert any("Test CPU (2 cores; vector sets not recorded)" in note for note in timing.notes)
+    assert not any("different machines" in note for note in timing.notes)
+
+
+def test_a_cell_timed_on_two_hosts_shows_its_lowest_seeds_timing_and_says_so() -> None:
+    """Seeds run later on a slower host carry their own timing; the cell is not their mean."""
+    import dataclasses
+
+    def on(record: ResultRecord, vector: str) -> ResultRecord:
+        return dataclasses.replace(
+            record, environment=dataclasses.replace(record.environment, cpu_vector=vector))
+
+    records = [on(make_record("bevplace", seed=0, ms=97.0), "avx2 fma avx512f"),
+               on(make_record("bevplace", seed=1, ms=342.0), "avx2 fma"),
+               on(make_record("sad", seed=0, ms=3.0), "avx2 fma avx512f"),
+               on(make_record("sad", seed=1, ms=3.0), "avx2 fma avx512f")]
+    timing = _table(records, time_table)
+    assert _rows(timing.markdown())[1:] == ["| bevplace | 1 | 97.00 [97.00, 97.00] |",
+                                           "| sad | 1 | 3.00 [3.00, 3.00] |"]
+    note = next(n for n in timing.notes if "different machines" in n)
+    assert "bevplace v1, T1R1: Test CPU (2 cores; avx2 fma avx512f) / Test CPU (2 cores; avx2 fma)" in note
+    assert "sad" not in note
 
 
 def test_a_cell_with_other_seeds_than_the_table_names_them() -> None:

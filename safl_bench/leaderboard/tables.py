@@ -464,23 +464,46 @@ def auc_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] =
 
 
 def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
-    """The paper's Table III: feature inference time per frame (ms, batch 1, median)."""
+    """The paper's Table III: feature inference time per frame (ms, batch 1, median).
+
+    A cell's timing is its lowest seed's record's: the runner times a cell once and its other
+    seeds carry that timing, but seeds run later (another day, another host) carry their own, and
+    a mean over hosts is no host's speed. A cell whose seeds were timed on different machines
+    (CPU model or vector instruction sets) is named in a note."""
     columns = condition_order(r.task.condition or "" for r in records)
+    first: dict[tuple[str, str, str], ResultRecord] = {}
+    hosts: dict[tuple[str, str, str], set[str]] = defaultdict(set)
+    for r in records:
+        cell = (r.method.name, r.method.version, r.task.id)
+        if cell not in first or r.seed < first[cell].seed:
+            first[cell] = r
+        hosts[cell].add(_machine(r))
 
     def extract(record: ResultRecord) -> Iterable[Value]:
         row = (record.method.name, record.method.version, "")
-        yield Value(row, record.task.condition or "", record.timings.describe_ms_per_frame)
+        timed = first[(record.method.name, record.method.version, record.task.id)]
+        yield Value(row, record.task.condition or "", timed.timings.describe_ms_per_frame)
 
-    machines = sorted(
-        {f"{r.environment.cpu_model} ({r.environment.cpu_cores} cores)" for r in records}
-    )
-    how = sorted({r.timings.how_run for r in records})
+    machines = sorted({_machine(r) for r in first.values()})
+    how = sorted({r.timings.how_run for r in first.values()})
     extra = [
-        "Describing one map at a time (batch 1), median over repeats; matching time excluded.",
+        "Describing one map at a time (batch 1), median over repeats; matching time excluded. "
+        "Each cell is its lowest seed's timing (the cell's timing).",
         f"Measured on: {'; '.join(machines)}. Runs: {'; '.join(how)}.",
     ]
     if len(machines) > 1:
         extra.append("Rows were timed on different machines: compare them with care.")
+    mixed: dict[tuple[str, str, tuple[str, ...]], list[str]] = defaultdict(list)
+    for (name, version, task), seen in hosts.items():
+        if len(seen) > 1:
+            mixed[(name, version, tuple(sorted(seen)))].append(first[(name, version, task)]
+                                                              .task.condition or task)
+    if mixed:
+        extra.append(
+            "Seeds of one cell timed on different machines (the cell shows its lowest seed's): "
+            + "; ".join(f"{name} v{version}, {', '.join(condition_order(cells))}: "
+                        f"{' / '.join(seen)}" for (name, version, seen), cells in sorted(mixed.items()))
+            + ".")
     return _build(
         key,
         records,
@@ -491,6 +514,13 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
         extract=extract,
         notes=[*notes, *extra],
     )
+
+
+def _machine(record: ResultRecord) -> str:
+    """The host a record was timed on, as the time table names it."""
+    env = record.environment
+    vector = env.cpu_vector or "vector sets not recorded"
+    return f"{env.cpu_model} ({env.cpu_cores} cores; {vector})"
 
 
 Metric = tuple[str, str, ValueFormat]
