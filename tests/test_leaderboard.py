@@ -100,7 +100,7 @@ def test_a_cell_timed_on_two_hosts_shows_its_lowest_seeds_timing_and_says_so() -
                on(make_record("sad", seed=0, ms=3.0), "avx2 fma avx512f"),
                on(make_record("sad", seed=1, ms=3.0), "avx2 fma avx512f")]
     timing = _table(records, time_table)
-    assert _rows(timing.markdown())[1:] == ["| bevplace | 1 | 97.00 [97.00, 97.00] |",
+    assert _rows(timing.markdown())[1:] == ["| bevplace | 1 | 97.00 (seed 0) |",
                                            "| sad | 1 | 3.00 [3.00, 3.00] |"]
     note = next(n for n in timing.notes if "different machines" in n)
     assert "bevplace v1, T1R1: Test CPU (2 cores; avx2 fma avx512f) / Test CPU (2 cores; avx2 fma)" in note

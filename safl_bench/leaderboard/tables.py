@@ -466,10 +466,10 @@ def auc_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] =
 def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
     """The paper's Table III: feature inference time per frame (ms, batch 1, median).
 
-    A cell's timing is its lowest seed's record's: the runner times a cell once and its other
-    seeds carry that timing, but seeds run later (another day, another host) carry their own, and
-    a mean over hosts is no host's speed. A cell whose seeds were timed on different machines
-    (CPU model or vector instruction sets) is named in a note."""
+    A cell's timing is the mean over its seeds timed on the host of its lowest seed: seeds run
+    later on another host (CPU model or vector instruction sets) carry that host's timing, and a
+    mean over hosts is no host's speed. Such cells are named in a note, and their other-host seeds
+    are left out of this table only."""
     columns = condition_order(r.task.condition or "" for r in records)
     first: dict[tuple[str, str, str], ResultRecord] = {}
     hosts: dict[tuple[str, str, str], set[str]] = defaultdict(set)
@@ -481,14 +481,17 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
 
     def extract(record: ResultRecord) -> Iterable[Value]:
         row = (record.method.name, record.method.version, "")
-        timed = first[(record.method.name, record.method.version, record.task.id)]
-        yield Value(row, record.task.condition or "", timed.timings.describe_ms_per_frame)
+        yield Value(row, record.task.condition or "", record.timings.describe_ms_per_frame)
+
+    def on_first_host(record: ResultRecord) -> bool:
+        return _machine(record) == _machine(first[(record.method.name, record.method.version,
+                                                   record.task.id)])
 
     machines = sorted({_machine(r) for r in first.values()})
     how = sorted({r.timings.how_run for r in first.values()})
     extra = [
         "Describing one map at a time (batch 1), median over repeats; matching time excluded. "
-        "Each cell is its lowest seed's timing (the cell's timing).",
+        "A cell is the mean over its seeds timed on its lowest seed's host.",
         f"Measured on: {'; '.join(machines)}. Runs: {'; '.join(how)}.",
     ]
     if len(machines) > 1:
@@ -500,13 +503,14 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
                                                               .task.condition or task)
     if mixed:
         extra.append(
-            "Seeds of one cell timed on different machines (the cell shows its lowest seed's): "
+            "Seeds of one cell timed on different machines (the cell is its lowest seed's host's; "
+            "the other seeds' timings are left out): "
             + "; ".join(f"{name} v{version}, {', '.join(condition_order(cells))}: "
                         f"{' / '.join(seen)}" for (name, version, seen), cells in sorted(mixed.items()))
             + ".")
     return _build(
         key,
-        records,
+        [r for r in records if on_first_host(r)],
         title="Feature inference time per frame (ms)",
         row_header=("Method", "Version", ""),
         columns=columns,
