@@ -122,6 +122,28 @@ def test_a_cell_with_other_seeds_than_the_table_names_them() -> None:
     assert {"T1R1 low", "T1R1 high", "T5R1 seeds"} <= set(header) and "T1R1 seeds" not in header
 
 
+def test_records_predating_a_setting_share_the_configuration_of_its_default() -> None:
+    """A record made before `truth_at` and `distance` existed was scored with their defaults:
+    the table names one configuration, not two; a real difference is still named."""
+    import dataclasses
+
+    from safl_bench.matching.settings import EvaluationConfig
+
+    now = EvaluationConfig().to_dict()
+    before = {**now, "evaluation": {k: v for k, v in now["evaluation"].items()
+                                    if k not in ("truth_at", "distance")}}
+    other = {**now, "evaluation": {**now["evaluation"], "truth_at": "viewpoint"}}
+
+    def with_matcher(seed: int, matcher: dict) -> ResultRecord:
+        return dataclasses.replace(make_record("a", seed=seed), matcher=matcher)
+
+    notes = _table([with_matcher(0, before), with_matcher(1, now)]).notes
+    assert any(n.startswith("Matcher preset (all rows): paper;") for n in notes)
+    assert not any("differ" in n for n in notes)
+    notes = _table([with_matcher(0, before), with_matcher(1, other)]).notes
+    assert any(n.startswith("Matcher settings differ between records (2 configurations") for n in notes)
+
+
 def test_cells_carry_bootstrap_intervals_and_bold_means_better_beyond_the_noise() -> None:
 
     records = [scored_record(m, seed=s, skill=k, variant=v, condition="T1R1")

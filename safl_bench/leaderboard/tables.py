@@ -18,7 +18,7 @@ import re
 from collections import defaultdict
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import pandas as pd
 
@@ -342,10 +342,23 @@ def _with_interval(cell: Cell, values: dict[int, float | None], records: list[Re
     return replace(cell, low=iv.low, high=iv.high)
 
 
+def _settings(matcher: dict[str, Any]) -> dict[str, Any]:
+    """A record's matcher settings with those it predates read as their defaults
+    (`EvaluationConfig.from_dict`), so records made before a setting existed and records made
+    after with its default are one configuration, not two; unreadable settings as recorded."""
+    from safl_bench.errors import ConfigError
+    from safl_bench.matching.settings import EvaluationConfig
+
+    try:
+        return EvaluationConfig.from_dict(matcher).to_dict()
+    except (ConfigError, TypeError):
+        return matcher
+
+
 def _matcher_notes(records: list[ResultRecord]) -> list[str]:
     from safl_bench.matching.presets import label
 
-    configs = sorted({json.dumps(r.matcher, sort_keys=True) for r in records})
+    configs = sorted({json.dumps(_settings(r.matcher), sort_keys=True) for r in records})
     labels = sorted({label(r.matcher) for r in records})
     if len(configs) == 1:
         settings = ", ".join(
