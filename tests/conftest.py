@@ -7,6 +7,7 @@ robot's LiDAR poses are known, the camera poses are written with KITTI's Tr, as 
 from __future__ import annotations
 
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +78,19 @@ def write_kitti(root: Path, name: str = "00", n: int = 12, seed: int = 0, max_ra
         "".join(" ".join(f"{v:.12e}" for v in p[:3].ravel()) + "\n" for p in cam)
     )
     return root
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread() -> Iterator[None]:
+    """One torch thread for a module of network tests (`pytestmark = pytest.mark.usefixtures(
+    "one_torch_thread")`): their results do not depend on it, and on a shared 2-core machine
+    two threads wait on each other (OpenMP) and run erratically slowly."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 @pytest.fixture(scope="session")

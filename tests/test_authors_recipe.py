@@ -34,12 +34,7 @@ from safl_bench.methods.method import make_method, method_class
 TINY = {"image_size": 16, "width": 2, "code_size": 8, "batch_size": 4}
 
 
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def bigan(**kw):
@@ -227,7 +222,7 @@ def maps():
 def straight(maps):
     done: list[int] = []
     before = torch.get_num_threads()
-    torch.set_num_threads(1)  # set up before the per-test one-thread fixture: as the other runs
+    torch.set_num_threads(1)  # as the tests run (one_torch_thread), whatever the fixture order
     try:
         method = bigan().fit(maps, step_callback=lambda step, _: done.append(step))
     finally:

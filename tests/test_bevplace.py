@@ -4,7 +4,6 @@ invariance, input checks and the refusal of unsafe or ill-fitting checkpoints.""
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,14 +24,7 @@ AUTHORS_TENSORS = 42
 AUTHORS_PARAMETERS = 456_904
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _one_thread() -> Iterator[None]:
-    """One torch thread here: the descriptors do not depend on it, and on a shared 2-core
-    machine two threads wait on each other (OpenMP) and run erratically slowly."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")

@@ -16,13 +16,7 @@ from safl_bench.errors import ConfigError, DataError, RegistryError
 from safl_bench.method import Method, as_topview
 from safl_bench.weights import load_tensors, save_tensors
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 class Good(Method):

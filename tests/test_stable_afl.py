@@ -15,13 +15,7 @@ from safl_bench.errors import ConfigError, DataError
 from safl_bench.method import Method
 from safl_bench.training import save_reconstructions
 
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def tiny(**kw):
