@@ -92,3 +92,22 @@ def test_train_on_the_test_sequence_warns_in_one_line_and_records_it(tmp_path, m
     data = TrainedOn.from_dict(loaded.weights_info["trained_on"])
     assert data is not None and data.sequences == ("00",) and data.source_kind == "bev"
     assert seen_note({"weights": loaded.weights_info}, "bev", "KITTI top-view images", "00")
+
+
+def test_train_without_out_writes_a_folder_per_version(tmp_path, monkeypatch, safl_home) -> None:
+    """The default run folder names the method's version: training bigan@1 and then bigan@2
+    with no --out never finds the other's checkpoint there."""
+    from conftest import write_bev
+
+    from safl_bench.cli import main
+    from safl_bench.cli import train as train_cli
+
+    root = write_bev(tmp_path / "bev", n=12)
+    maps = np.random.default_rng(0).random((12, 41, 41)).astype(np.float32)
+    monkeypatch.setattr(train_cli, "load_training_maps", lambda *a, **k: (maps, {"02": 12}))
+    assert main(["train", "--method", "bigan@1", "--bev-root", str(root), "--sequences", "02",
+                 "--epochs", "1", "--batch-size", "4", "--no-progress", "--val-task", "none",
+                 "--set", "width=4", "--set", "encoder_width=4", "--set", "code_size=8",
+                 "--set", "hidden=8"]) == 0
+    (run,) = (safl_home / "weights").iterdir()
+    assert run.name == "bigan-v1-bev-seed0" and (run / "bigan.safetensors").is_file()

@@ -5,7 +5,8 @@ with --bev-root, the top-view images, whose other sequences 00, 05 and 06 are fo
 evaluation only; else the synthetic default's training sequences), every `--step`-th frame, from
 the map cache, resampled to the method's input size.
 
-Writes into --out (default <home>/weights/<method>-<source>-seed<seed>):
+Writes into --out (default <home>/weights/<method>-v<version>-<source>-seed<seed>, so two
+versions of one method never share a run folder):
   last.safetensors     checkpoint after the last completed epoch (all networks + optimizers)
   log.jsonl            per-epoch losses, seconds and the validation AUC per condition (--val-task):
                        the data of the training-stability figure (the paper's Figure 14)
@@ -189,7 +190,7 @@ def main(args: argparse.Namespace) -> int:
         source = synth_source(seed, sequences, progress=progress)
         tag = f"synth{seed}"
 
-    out = Path(args.out) if args.out else paths.home() / "weights" / f"{cls.name}-{tag}-seed{method.seed}"
+    out = Path(args.out) if args.out else paths.home() / "weights" / f"{cls.name}-v{cls.version}-{tag}-seed{method.seed}"
     if (out / CHECKPOINT).exists() and not args.resume:
         raise ConfigError(f"{out} already holds a training run; pass --resume to continue it or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
