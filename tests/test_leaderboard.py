@@ -95,7 +95,12 @@ def test_a_cell_timed_on_two_hosts_shows_its_lowest_seeds_timing_and_says_so() -
         return dataclasses.replace(
             record, environment=dataclasses.replace(record.environment, cpu_vector=vector))
 
-    records = [on(make_record("bevplace", seed=0, ms=97.0), "avx2 fma avx512f"),
+    def retimed(record: ResultRecord) -> ResultRecord:
+        how = (f"{record.timings.how_run}; timed by the run of 2026-12-01T21:43:31Z (git abc); "
+               "rescored with metrics version 3")
+        return dataclasses.replace(record, timings=dataclasses.replace(record.timings, how_run=how))
+
+    records = [on(retimed(make_record("bevplace", seed=0, ms=97.0)), "avx2 fma avx512f"),
                on(make_record("bevplace", seed=1, ms=342.0), "avx2 fma"),
                on(make_record("sad", seed=0, ms=3.0), "avx2 fma avx512f"),
                on(make_record("sad", seed=1, ms=3.0), "avx2 fma avx512f")]
@@ -105,6 +110,12 @@ def test_a_cell_timed_on_two_hosts_shows_its_lowest_seeds_timing_and_says_so() -
     note = next(n for n in timing.notes if "different machines" in n)
     assert "bevplace v1, T1R1: Test CPU (2 cores; avx2 fma avx512f) / Test CPU (2 cores; avx2 fma)" in note
     assert "sad" not in note
+    # the seed left out was run: the note on the cell's seeds does not ask to run it
+    seeds = next(n for n in timing.notes if "over seed(s) 0 only" in n)
+    assert "timed on another host" in seeds and "run the missing seeds" not in seeds
+    # how the rows were timed, once; which run timed each record stays in the records
+    runs = next(n for n in timing.notes if n.startswith("Measured on"))
+    assert runs.count("sequential, pinned") == 1 and "timed by the run of" not in runs
 
 
 def test_a_cell_with_other_seeds_than_the_table_names_them() -> None:

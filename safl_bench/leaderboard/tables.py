@@ -224,6 +224,9 @@ class Value(NamedTuple):
 Extractor = Callable[[ResultRecord], Iterable[Value]]
 
 
+_FEWER_SEEDS = "compared with other rows on the seeds both have; run the missing seeds to fill them."
+
+
 def _build(
     key: TableKey,
     records: list[ResultRecord],
@@ -234,7 +237,10 @@ def _build(
     formats: list[ValueFormat],
     extract: Extractor,
     notes: Iterable[str] = (),
+    fewer_seeds: str = _FEWER_SEEDS,
 ) -> Table:
+    """The table of `records` (`extract` gives each record's values). `fewer_seeds` ends the note
+    on a cell over fewer seeds than the table's: what to make of it and how to fill it."""
     from safl_bench.methods.training_data import record_seen
 
     seeds = seed_set(records)
@@ -293,8 +299,7 @@ def _build(
         )
         all_notes.append(
             f"{label}: {', '.join(cols)} over seed(s) {format_seeds(theirs)} only (the table's: "
-            f"{format_seeds(seeds)}); compared with other rows on the seeds both have; run the "
-            "missing seeds to fill them."
+            f"{format_seeds(seeds)}); {fewer_seeds}"
         )
     if with_intervals and bootstrapped and any(
             c is not None and c.mean is not None and c.low is None for line in cells for c in line):
@@ -476,6 +481,11 @@ def auc_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] =
     )
 
 
+#: Clauses of `Timings.how_run` that say which run timed a record (`safl_bench.run.runner`), not
+#: how it was timed: the time table's note leaves them to the records.
+_PROVENANCE = ("timed by the run of ", "rescored with metrics version ", "the cell's timing ")
+
+
 def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
     """The paper's Table III: feature inference time per frame (ms, batch 1, median).
 
@@ -501,11 +511,13 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
                                                    record.task.id)])
 
     machines = sorted({_machine(r) for r in first.values()})
-    how = sorted({r.timings.how_run for r in first.values()})
+    how = sorted({clause for r in first.values() for clause in r.timings.how_run.split("; ")
+                  if not clause.startswith(_PROVENANCE)})
     extra = [
         "Describing one map at a time (batch 1), median over repeats; matching time excluded. "
         "A cell is the mean over its seeds timed on its lowest seed's host.",
-        f"Measured on: {'; '.join(machines)}. Runs: {'; '.join(how)}.",
+        f"Measured on: {'; '.join(machines)}. Runs: {'; '.join(how)} (each record's "
+        "`timings.how_run` says which run timed it).",
     ]
     if len(machines) > 1:
         extra.append("Rows were timed on different machines: compare them with care.")
@@ -530,6 +542,7 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
         formats=[MS_FORMAT] * len(columns),
         extract=extract,
         notes=[*notes, *extra],
+        fewer_seeds="its other seeds were not run, or were timed on another host (see the note on hosts).",
     )
 
 
