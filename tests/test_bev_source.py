@@ -187,12 +187,12 @@ def test_tasks_on_the_images_and_their_records(bev_root, safl_home, tmp_path, ti
 
 
 def test_bevplace_tasks_are_registered_with_its_ranges() -> None:
-    spec = tasks.spec("SAFL/BEVKITTI02-BEVPlace-v0")
+    spec = tasks.spec("SAFL/BEVKITTI02-BEVPlace-v1")
     assert (spec.database_frames, spec.query_frames, spec.tp_radius_m, spec.step) == (
         (0, 3400), (3600, 4661), 5.0, 1)
-    assert tasks.suite("bev-bevplace") == [f"SAFL/BEVKITTI{s}-BEVPlace-v0" for s in ("00", "02", "05", "06")]
+    assert tasks.suite("bev-bevplace") == [f"SAFL/BEVKITTI{s}-BEVPlace-v1" for s in ("00", "02", "05", "06")]
     assert tasks.suite("bev-paper", source="synth") == tasks.suite("bev-paper")  # source-specific suite
-    assert "resampled to the moved viewpoint" in tasks.spec("SAFL/BEVKITTI00-T20R2-v0").description
+    assert "resampled to the moved viewpoint" in tasks.spec("SAFL/BEVKITTI00-T20R2-v1").description
     with pytest.raises(ConfigError, match="frame ranges belong to the bevplace protocol only"):
         tasks.TaskSpec(id="Test/X-v0", source="bev", sequence="00", database_frames=(0, 3))
 

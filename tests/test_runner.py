@@ -140,8 +140,8 @@ def test_resolve_tasks_expands_suites():
     assert len(paper) == 12 and all(t.startswith("SAFL/Synth00-") for t in paper)
     kitti = runner.resolve_tasks(["paper"], source="kitti")
     assert all(t.startswith("SAFL/KITTI00-") for t in kitti)
-    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v4", "paper"])
-    assert mixed[0] == "SAFL/Synth00-T1R1-v4" and len(mixed) == 12
+    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v5", "paper"])
+    assert mixed[0] == "SAFL/Synth00-T1R1-v5" and len(mixed) == 12
     assert all(t.endswith("-v4") for t in paper)
 
 

@@ -49,10 +49,10 @@ def temp_register() -> Iterator[Callable[..., TaskSpec]]:
 
 def test_builtin_suites_cover_the_paper_and_revisit() -> None:
     paper = tasks.suite("paper", source="synth")
-    assert paper == [f"SAFL/Synth00-{c.name}-v4" for c in PAPER_CONDITIONS]
+    assert paper == [f"SAFL/Synth00-{c.name}-v5" for c in PAPER_CONDITIONS]
     full_kitti = tasks.suite("paper-full", source="kitti")
     for seq in ("00", "09"):
-        assert [f"SAFL/KITTI{seq}-{c.name}-v0" for c in PAPER_CONDITIONS] == [
+        assert [f"SAFL/KITTI{seq}-{c.name}-v1" for c in PAPER_CONDITIONS] == [
             i for i in full_kitti if i.startswith(f"SAFL/KITTI{seq}")
         ]
     assert set(tasks.suite("revisit")) == {
@@ -71,7 +71,7 @@ def test_builtin_suites_cover_the_paper_and_revisit() -> None:
         30.0,
         CLEAN,
     )
-    spec = tasks.spec("SAFL/Synth09-T20R2-v4")
+    spec = tasks.spec("SAFL/Synth09-T20R2-v5")
     assert (spec.condition, spec.step, spec.tp_radius_m, spec.window_s) == (
         Condition(20, 2),
         4,
@@ -105,8 +105,8 @@ def test_unknown_ids_suggest_close_ones() -> None:
         tasks.spec("SAFL/KITI00-T5R1.5-v0")
     with pytest.raises(RegistryError, match="unknown task"):
         tasks.make("nothing like it")
-    with pytest.raises(RegistryError, match="no version v5; registered versions: v0, v1, v2, v3, v4"):
-        tasks.spec("SAFL/Synth00-T1R1-v5")
+    with pytest.raises(RegistryError, match="no version v6; registered versions: v0, v1, v2, v3, v4, v5"):
+        tasks.spec("SAFL/Synth00-T1R1-v6")
 
 
 def test_duplicates_versions_and_fingerprints(temp_register: Callable[..., TaskSpec]) -> None:
@@ -145,8 +145,9 @@ SYNTH_T1R1_V3 = "b9607d4916279bcc"
 def test_synthetic_tasks_name_their_data_version_in_the_fingerprint() -> None:
     from safl_bench.synth import GENERATOR_VERSION
 
-    assert TASK_VERSION["synth"] == max(SYNTH_DATA_VERSIONS)
-    assert SYNTH_DATA_VERSIONS[TASK_VERSION["synth"]] == GENERATOR_VERSION == "5"
+    assert TASK_VERSION["paper"]["synth"] == max(SYNTH_DATA_VERSIONS)
+    assert SYNTH_DATA_VERSIONS[TASK_VERSION["paper"]["synth"]] == GENERATOR_VERSION == "5"
+    assert SYNTH_DATA_VERSIONS[TASK_VERSION["revisit"]["synth"]] == GENERATOR_VERSION
     old, mid, v2, v3, new = (tasks.registry[f"SAFL/Synth00-T1R1-v{v}"] for v in (0, 1, 2, 3, 4))
     assert (old.data_version, mid.data_version, v2.data_version, v3.data_version,
             new.data_version) == ("1", "2", "3", "4", "5")
@@ -159,7 +160,8 @@ def test_synthetic_tasks_name_their_data_version_in_the_fingerprint() -> None:
     assert len({old.fingerprint, mid.fingerprint, v2.fingerprint, v3.fingerprint, new.fingerprint}) == 5
     assert {k: v for k, v in new.definition().items() if k != "data_version"} == old.definition()
     for superseded_id in superseded():
-        current = superseded_id.rsplit("-v", 1)[0] + "-v4"
+        name = superseded_id.rsplit("-v", 1)[0]
+        current = next(i for i in tasks.suite("all") if i.rsplit("-v", 1)[0] == name)
         assert tasks.registry[current].fingerprint != tasks.registry[superseded_id].fingerprint
     # a synthetic task registered without one is on the data this safl-bench generates
     assert TaskSpec(id="Test/A-v0", source="synth", sequence="00").data_version == GENERATOR_VERSION
@@ -173,25 +175,34 @@ def test_real_data_fingerprints_are_unchanged() -> None:
     for task_id in tasks.suite("all"):
         spec = tasks.registry[task_id]
         if spec.source != "synth":
-            assert spec.version == 0 and spec.data_version is None
+            assert spec.version == (0 if spec.protocol == "revisit" else 1)
+            assert spec.data_version is None
             assert "data_version" not in spec.definition()
 
 
-def test_suites_hold_only_the_current_synthetic_version() -> None:
-    assert sorted(superseded()) == sorted(
-        i for i, s in tasks.registry.items()
-        if i.startswith("SAFL/Synth") and s.version in (0, 1, 2, 3))
-    assert len(superseded()) == 112  # 4 old versions x (2 x (12 conditions + T0R0) + 2 revisit)
+def test_suites_hold_only_the_current_versions() -> None:
+    old_data = [i for i, s in tasks.registry.items()
+                if i.startswith("SAFL/Synth") and s.version in (0, 1, 2, 3)]
+    scored_every_query = [i for i, s in tasks.registry.items() if i.startswith("SAFL/")
+                          and s.protocol in ("paper", "bevplace") and not s.context_queries
+                          and i not in old_data]
+    assert sorted(superseded()) == sorted(old_data + scored_every_query)
+    assert len(old_data) == 112  # 4 old versions x (2 x (12 conditions + T0R0) + 2 revisit)
+    # synthetic paper v4 (2 x 13), KITTI paper v0 (2 x 13), top-view paper v0 (13), BEVPlace v0 (4)
+    assert len(scored_every_query) == 26 + 26 + 13 + 4
     for name in tasks.SUITES:
         ids = tasks.suite(name)
         assert not set(ids) & set(superseded()), name
-        synth = [i for i in ids if tasks.registry[i].source == "synth"]
-        assert all(i.endswith("-v4") for i in synth), name
+        for i in ids:
+            spec = tasks.registry[i]
+            assert spec.context_queries == (10 if spec.protocol != "revisit" else 0), i
     assert len(tasks.suite("all", source="synth")) == 28
-    assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v4",
-                                                          "SAFL/Synth09-T0R0-v4"}
-    with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v4"):
-        assert tasks.spec("SAFL/Synth00-T1R1").id == "SAFL/Synth00-T1R1-v4"
+    assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v5",
+                                                          "SAFL/Synth09-T0R0-v5"}
+    with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v5"):
+        assert tasks.spec("SAFL/Synth00-T1R1").id == "SAFL/Synth00-T1R1-v5"
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-T1R1-v5"):
+        assert tasks.spec("SAFL/Synth00-T1R1-v4").data_version == "5"  # records resolve
     with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
         assert tasks.spec("SAFL/Synth00-Revisit-v0").data_version == "1"  # records resolve
     with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
@@ -202,10 +213,33 @@ def test_suites_hold_only_the_current_synthetic_version() -> None:
         assert tasks.spec("SAFL/Synth00-Revisit-v3").data_version == "4"
 
 
+def test_the_new_versions_differ_from_the_old_only_by_their_context_queries() -> None:
+    """Successor and predecessor: the same definition but the context queries (so a record of
+    the old version holds every outcome the new one scores), and no other pair."""
+    from safl_bench.tasks.builtin import predecessor, successor
+
+    pairs = {"SAFL/Synth00-T1R1-v4": "SAFL/Synth00-T1R1-v5",
+             "SAFL/Synth09-T0R0-v4": "SAFL/Synth09-T0R0-v5",
+             "SAFL/KITTI00-T20R2-v0": "SAFL/KITTI00-T20R2-v1",
+             "SAFL/BEVKITTI00-T5R1.5-v0": "SAFL/BEVKITTI00-T5R1.5-v1",
+             "SAFL/BEVKITTI02-BEVPlace-v0": "SAFL/BEVKITTI02-BEVPlace-v1"}
+    for old, new in pairs.items():
+        assert successor(old) == new and predecessor(new) == old
+        a, b = tasks.registry[old].definition(), tasks.registry[new].definition()
+        assert {k: v for k, v in b.items() if k != "context_queries"} == a
+        assert b["context_queries"] == 10 and "context_queries" not in a
+    for other in ("SAFL/Synth00-T1R1-v3", "SAFL/Synth00-Revisit-v4", "SAFL/BEVKITTI00-T1R1-v1",
+                  "SAFL/BEVKITTI00-Revisit-v0", "nothing"):
+        assert successor(other) is None
+    assert predecessor("SAFL/Synth00-Revisit-v4") is None
+    with pytest.raises(ConfigError, match="context_queries must be an integer >= 0"):
+        TaskSpec(id="Test/A-v0", source="synth", sequence="00", context_queries=-1)
+
+
 OLD_DATA = (r"^SAFL/Synth00-T1R1-v0 was defined on synthetic data version 1; this safl-bench "
-            r"generates version 5: run SAFL/Synth00-T1R1-v4 ")
+            r"generates version 5: run SAFL/Synth00-T1R1-v5 ")
 V1_DATA = (r"^SAFL/Synth00-T1R1-v1 was defined on synthetic data version 2; this safl-bench "
-           r"generates version 5: run SAFL/Synth00-T1R1-v4 ")
+           r"generates version 5: run SAFL/Synth00-T1R1-v5 ")
 
 
 def test_an_old_synthetic_task_cannot_be_materialised(tmp_path: Path) -> None:
@@ -240,17 +274,17 @@ def test_an_old_synthetic_task_cannot_be_run(
                      "--results", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("safl-bench: error: SAFL/Synth00-T1R1-v0 was")
-    assert "run SAFL/Synth00-T1R1-v4" in err[0]
+    assert "run SAFL/Synth00-T1R1-v5" in err[0]
     assert cli_main(["run", "--method", "sad", "--task", "SAFL/Synth00-T1R1-v1",
                      "--results", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("safl-bench: error: SAFL/Synth00-T1R1-v1 was")
-    assert "run SAFL/Synth00-T1R1-v4" in err[0]
+    assert "run SAFL/Synth00-T1R1-v5" in err[0]
     with pytest.raises(ConfigError, match=OLD_DATA):
         runner.resolve_tasks(["SAFL/Synth00-T1R1-v0"])
     with pytest.raises(ConfigError, match=V1_DATA):
         runner.resolve_tasks(["SAFL/Synth00-T1R1-v1"])
-    assert runner.resolve_tasks(["sanity"]) == ["SAFL/Synth00-T0R0-v4", "SAFL/Synth09-T0R0-v4"]
+    assert runner.resolve_tasks(["sanity"]) == ["SAFL/Synth00-T0R0-v5", "SAFL/Synth09-T0R0-v5"]
     options = runner.RunOptions(results_dir=tmp_path, progress=False)
     with pytest.raises(ConfigError, match=OLD_DATA):
         runner.run_cell(make_method("sad"), "SAFL/Synth00-T1R1-v0", options, log=print)
@@ -262,7 +296,7 @@ def test_an_old_synthetic_task_cannot_be_run(
     assert [(o.task_id, o.seed) for o in outcomes] == [  # each of the tasks' five seeds fails
         (t, seed) for seed in range(5) for t in ("SAFL/Synth00-T1R1-v0", "SAFL/Synth00-T1R1-v1")]
     for outcome in outcomes:
-        assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v4" in outcome.message
+        assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v5" in outcome.message
     assert not any(tmp_path.iterdir())  # nothing made, nothing written
 
 
@@ -307,7 +341,7 @@ def test_list_tasks_cli_shows_paper_and_revisit_tasks(capsys: pytest.CaptureFixt
     )
     lines = capsys.readouterr().out.splitlines()
     assert sum(line.startswith("SAFL/KITTI00-") for line in lines) == 12
-    assert tasks.spec("SAFL/KITTI00-T1R1-v0").fingerprint in lines[2]
+    assert tasks.spec("SAFL/KITTI00-T1R1-v1").fingerprint in lines[2]
 
 
 # ---------------------------------------------------------------- noise
@@ -414,13 +448,13 @@ def test_kitti_tasks_say_what_is_missing(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path, kitti_root: Path
 ) -> None:
     monkeypatch.delenv("SAFL_KITTI_ROOT", raising=False)
-    with pytest.raises(DataError, match=r"SAFL/KITTI00-T1R1-v0.*--kitti-root.*SAFL_KITTI_ROOT"):
-        tasks.make("SAFL/KITTI00-T1R1-v0")
+    with pytest.raises(DataError, match=r"SAFL/KITTI00-T1R1-v1.*--kitti-root.*SAFL_KITTI_ROOT"):
+        tasks.make("SAFL/KITTI00-T1R1-v1")
     with pytest.raises(DataError, match="does not exist"):
-        tasks.make("SAFL/KITTI00-T1R1-v0", kitti_root=str(tmp_path / "nowhere"))
+        tasks.make("SAFL/KITTI00-T1R1-v1", kitti_root=str(tmp_path / "nowhere"))
     monkeypatch.setenv("SAFL_KITTI_ROOT", str(kitti_root))
-    with pytest.raises(DataError, match=r"SAFL/KITTI09-T1R1-v0.*09.*sequences under .*: 00"):
-        tasks.make("SAFL/KITTI09-T1R1-v0")
+    with pytest.raises(DataError, match=r"SAFL/KITTI09-T1R1-v1.*09.*sequences under .*: 00"):
+        tasks.make("SAFL/KITTI09-T1R1-v1")
 
 
 def test_import_registers_tasks_without_loading_data() -> None:

@@ -165,8 +165,8 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     enhanced = enhanced_matrix(D, config.sequence)
 
     nq = len(D)
-    scored = scored_queries(nq, config.trim_queries)
-    part = subset_truth(truth, scored, slice(None)) if config.trim_queries else truth
+    scored = scored_queries(nq, config.trim_queries, task.spec.context_queries)
+    part = subset_truth(truth, scored, slice(None)) if scored != slice(0, nq) else truth
     outcomes = match_outcomes(truth, result)  # every query; the metrics see the scored ones
     metrics = score_matches(part, subset_result(result, scored))
 
@@ -370,12 +370,13 @@ def _auc(metrics: Metrics) -> str:
 
 
 def _shade_unscored(ax: Any, ex: Explanation) -> None:
-    """Grey bands over the queries `trim_queries` leaves out of the metrics."""
-    t, nq = ex.config.trim_queries, len(ex.status)
-    if t:
-        for k, (a, b) in enumerate(((-1, t - 0.5), (nq - t - 0.5, nq))):
-            ax.axvspan(a, b, color="0.9", zorder=0,
-                       label=f"left out of the metrics (trim_queries={t})" if k == 0 else None)
+    """Grey bands over the queries left out of the metrics (the task's context queries and
+    `trim_queries`)."""
+    unscored = ex.status == NOT_SCORED
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], unscored.astype(np.int8), [0]])))
+    for k, (a, b) in enumerate(zip(edges[::2], edges[1::2], strict=True)):
+        ax.axvspan(a - 0.5, b - 0.5, color="0.9", zorder=0,
+                   label="left out of the metrics (context queries, trim_queries)" if k == 0 else None)
 
 
 def _shade_short(ax: Any, ex: Explanation) -> None:

@@ -245,7 +245,8 @@ def run(experiment: Experiment, methods: Callable[[str], Sequence[Method]], cell
                             method, method_input(method, arms[arm]),
                             method_input(method, task.database(method.input_kind)),
                             task.truth_for(experiment.evaluation),
-                            config=experiment.evaluation, memo=memo).outcomes
+                            config=experiment.evaluation, memo=memo,
+                            context=task.spec.context_queries).outcomes
                         _save_outcomes(path, found)
                     outcomes[i][arm].append(found[experiment.mode])
         mean_agreement = {k: float(np.mean([a[k] for a in agreement])) for k in agreement[0]}

@@ -39,6 +39,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
     "records": {
         "schema": ("records_schema", "print (or write with --out) the JSON Schema of a result record file"),
         "check": ("records_check", "validate the result records under a folder, one line per bad file"),
+        "migrate": ("records_migrate", "derive the records of the current task versions from those of the versions they replaced"),
     },
     "run": ("run", "run a method on benchmark tasks and store result records"),
     "explain": ("explain", "draw one cell's matrices, matches, scores and worst false positives to a PNG"),
@@ -52,7 +53,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
 GROUP_HELP = {
     "data": "make, inspect and prepare datasets (synthetic default or KITTI)",
     "list": "list registered tasks or methods",
-    "records": "the result records: their JSON Schema, and a check of a folder of them",
+    "records": "the result records: their JSON Schema, a check of a folder of them, and their move to new task versions",
 }
 
 

@@ -103,7 +103,8 @@ def validation_callback(task_ids: list[str], source_label: str, kitti_root: str 
         aucs: dict[str, float | None] = {}
         for task in tasks:
             result = evaluate_method(method, method_input(method, task.queries("topview")),
-                                     method_input(method, task.database("topview")), task.truth)
+                                     method_input(method, task.database("topview")), task.truth,
+                                     context=task.spec.context_queries)
             aucs[task.spec.condition.name] = result.metrics["sequence"].roc_auc
         return {"val_auc": aucs, "val_tasks": [t.id for t in tasks], "source": source_label}
 

@@ -157,11 +157,12 @@ def evaluate_method(
     config: EvaluationConfig | None = None,
     revisit: bool = False,
     memo: DatabaseMemo | None = None,
+    context: int = 0,
 ) -> Evaluation:
     """Run `method` on one task's views and score both matching modes (`config.max_frames`
-    limits both sides first; `config.trim_queries` leaves queries at the ends out of the
-    metrics, not out of the matches). `memo`: database descriptors to reuse
-    (`describe_database`)."""
+    limits both sides first; `context`, the task's `TaskSpec.context_queries`, and
+    `config.trim_queries` leave queries out of the metrics, not out of the matches: see
+    `scored_queries`). `memo`: database descriptors to reuse (`describe_database`)."""
     cfg = config or EvaluationConfig()
     if cfg.max_frames is not None:
         queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
@@ -174,8 +175,8 @@ def evaluate_method(
         t0 = time.perf_counter()
         matches[mode] = match(D, cfg.matcher(mode), db_limit=limit)
         seconds[mode] = time.perf_counter() - t0
-    scored = scored_queries(len(D), cfg.trim_queries)
-    part = subset_truth(truth, scored, slice(None)) if cfg.trim_queries else truth
+    scored = scored_queries(len(D), cfg.trim_queries, context)
+    part = subset_truth(truth, scored, slice(None)) if scored != slice(0, len(D)) else truth
     ranks = true_place_ranks(D[scored], [part.true_matches(i) for i in range(part.n_queries)],
                              db_limit=None if limit is None else limit[scored],
                              dtype=cfg.single_frame.dtype)
@@ -186,11 +187,18 @@ def evaluate_method(
     return Evaluation(matches, per_query, metrics, describe_s, n, seconds["sequence"])
 
 
-def scored_queries(n_queries: int, trim: int) -> slice:
-    """The queries the metrics see: all but the first and the last `trim` (`trim_queries`)."""
-    if 2 * trim >= n_queries:
-        raise ConfigError(f"trim_queries={trim} leaves none of the {n_queries} queries to evaluate")
-    return slice(trim, n_queries - trim)
+def scored_queries(n_queries: int, trim: int, context: int = 0) -> slice:
+    """The queries the metrics see, of the `n_queries` matched: all but the task's first
+    `context` (`TaskSpec.context_queries`) and the evaluation's first and last `trim`
+    (`trim_queries`), i.e. ``[max(context, trim), n_queries - trim)``: both rules leave the same
+    leading queries out, so they do not add up. Every method and both matching modes of a task
+    are scored on these queries; a query among them that a setting leaves unanswered (e.g.
+    ``edge_queries="skip"``) is scored as a query that reported no match."""
+    start = max(trim, context)
+    if start >= n_queries - trim:
+        raise ConfigError(f"trim_queries={trim} and {context} context queries leave none of the "
+                          f"{n_queries} queries to evaluate")
+    return slice(start, n_queries - trim)
 
 
 def subset_truth(truth: GroundTruth, queries: slice, database: slice) -> GroundTruth:

@@ -310,6 +310,20 @@ class Timings:
 
 
 @dataclass(frozen=True)
+class Derivation:
+    """Where a derived record's matches come from (`safl_bench.results.derive`): the record of
+    the superseded task version `task` (made at `created`) whose per-query outcomes it keeps,
+    with the queries the new version leaves out of the measures dropped and every measure
+    recomputed; `note` says so in one line."""
+
+    __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
+
+    task: Name
+    created: Annotated[Name, AfterValidator(_iso_time)]
+    note: Text
+
+
+@dataclass(frozen=True)
 class ResultRecord:
     """One run of one method on one task with one seed."""
 
@@ -329,6 +343,9 @@ class ResultRecord:
     #: one line when the method's weights were trained on this task's sequence (None: not, or
     #: unknown); `safl_bench.methods.training_data`
     seen_in_training: Text | None = None
+    #: set when the record was derived from one of a superseded task version instead of
+    #: computed (`safl_bench.results.derive`); None for a computed record
+    derived_from: Derivation | None = None
 
     @property
     def key(self) -> tuple[str, str, str, int]:

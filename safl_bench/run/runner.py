@@ -92,7 +92,7 @@ class CellOutcome:
 
     task_id: str
     seed: int
-    status: str  # "computed", "reused", "rescored" or "failed"
+    status: str  # "computed", "reused", "rescored", "derived" (`_derived`) or "failed"
     path: Path
     record: ResultRecord | None = None
     message: str = ""
@@ -176,6 +176,10 @@ def _existing(
                     "recomputing it (its timings are kept)")
             else:
                 log(f"note: {path} was made with other settings ({why}); recomputing it")
+    else:
+        derived = _derived(registered, seed, info, matcher, options, log)
+        if derived is not None:
+            return seed, derived
     pending = evaluated_path(options.results_dir, info.name, info.version, registered.id, seed)
     if pending.is_file():
         try:
@@ -188,6 +192,34 @@ def _existing(
             ):
                 return seed, cell
     return seed, None
+
+
+def _derived(registered: TaskSpec, seed: int, info: MethodInfo, matcher: dict[str, Any],
+             options: RunOptions, log: Callable[[str], None]) -> CellOutcome | None:
+    """The cell's record derived from one of the task version it replaced, when the results
+    folder holds such a record of the same run (`safl_bench.results.derive`); None otherwise."""
+    from safl_bench.results.derive import NotDerivableError, derive_record
+    from safl_bench.tasks.builtin import predecessor
+
+    old_id = predecessor(registered.id)
+    if old_id is None:
+        return None
+    old_path = record_path(options.results_dir, info.name, info.version, old_id, seed)
+    if not old_path.is_file():
+        return None
+    try:
+        old = load_record(old_path)
+        from safl_bench.tasks.registry import registry
+
+        if _same_run(old.method, old.task, old.matcher, info, registry[old_id].fingerprint, matcher):
+            return None
+        new = derive_record(old, registered)
+    except (CorruptRecordError, NotDerivableError) as exc:
+        log(f"note: {old_path} cannot be derived from ({exc}); computing the cell")
+        return None
+    written = write_record(options.results_dir, new)
+    return CellOutcome(registered.id, seed, "derived", written, new, method=info.name,
+                       version=info.version)
 
 
 def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool,
@@ -225,6 +257,7 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
             method, method_input(method, queries), method_input(method, database),
             task.truth_for(options.evaluation), config=options.evaluation,
             revisit=task.spec.protocol == "revisit", memo=memo,
+            context=task.spec.context_queries,
         )
     except NoPositivesError as exc:
         raise NoPositivesError(f"task {registered.id} (seed {task.spec.seed}): {exc}; its "

@@ -20,10 +20,18 @@ are the images resampled to the moved viewpoint (there are no points to re-rende
 neighbour, what comes from outside the image is empty; at T20 up to a third of a 60.4 m wide
 view along the shift, see `safl_bench.views.resample`).
 
-Synthetic tasks are at task version v4, on synthetic data version "5" (`SYNTH_DATA_VERSIONS`);
-their v0, v1, v2 and v3, on data versions "1", "2", "3" and "4", stay registered so that their
-records resolve, but in no suite, and they cannot be run (this safl-bench generates version "5"
-only). KITTI and top-view image tasks are at v0.
+Versions (`TASK_VERSION`, per protocol and source). The paper protocol is at v5 on the synthetic
+default and v1 on KITTI scans and top-view images, BEVPlace's protocol at v1: these versions
+leave the first `CONTEXT_QUERIES` (the paper's d_s = 10) queries out of every measure
+(`TaskSpec.context_queries`), so that every scored query carries the default matcher's whole
+trajectory (issue #37). Their predecessors (synthetic paper v4, KITTI and top-view paper v0,
+BEVPlace v0) scored every query, the first ones on a shortened trajectory; they stay registered
+and runnable, in no suite, and `successor` names the version that replaced each. The revisit
+protocol is unchanged (v4 synthetic, v0 elsewhere): its first queries have no candidate older
+than the 30 s window (ten queries at every 4th frame span 3.6 s at 10 Hz), so none of them is
+ever answered. Synthetic tasks are on synthetic data version "5" (`SYNTH_DATA_VERSIONS`); their
+v0, v1, v2 and v3, on data versions "1", "2", "3" and "4", stay registered so that their records
+resolve, but they cannot be run (this safl-bench generates version "5" only).
 
 Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
 """
@@ -58,6 +66,9 @@ BEVPLACE_RANGES = {
     "06": ((0, 600), (800, 1101)),
 }
 BEVPLACE_TP_RADIUS_M = 5.0
+#: Leading queries that are context only in the current paper and BEVPlace tasks: the paper's
+#: d_s (Table I), the number of earlier queries a causal trajectory of the default matcher reads.
+CONTEXT_QUERIES = 10
 
 SUITES = {
     "paper": "the paper's twelve conditions on the default test sequence 00",
@@ -76,42 +87,62 @@ _BUILTIN: dict[str, list[str]] = {name: [] for name in SUITES}
 #: Built-in tasks of older versions: registered (their records resolve), in no suite.
 _SUPERSEDED: list[str] = []
 
-#: The current version of the built-in tasks per source: the one the suites hold.
-TASK_VERSION = {"synth": 4, "kitti": 0, "bev": 0}
+#: The current version of the built-in tasks per protocol and source: the one the suites hold.
+TASK_VERSION = {
+    "paper": {"synth": 5, "kitti": 1, "bev": 1},
+    "revisit": {"synth": 4, "kitti": 0, "bev": 0},
+    "bevplace": {"bev": 1},
+}
+#: The first version per protocol and source whose leading queries are context only
+#: (`CONTEXT_QUERIES`); the versions before it score every query.
+CONTEXT_FROM = {"paper": {"synth": 5, "kitti": 1, "bev": 1}, "bevplace": {"bev": 1}}
 #: Task version of the synthetic tasks -> the synthetic data version it is defined on
-#: (`synth.GENERATOR_VERSION`); the versions before `TASK_VERSION["synth"]` are superseded.
-SYNTH_DATA_VERSIONS = {0: "1", 1: "2", 2: "3", 3: "4", 4: "5"}
+#: (`synth.GENERATOR_VERSION`); versions on another data version than the newest cannot be run.
+SYNTH_DATA_VERSIONS = {0: "1", 1: "2", 2: "3", 3: "4", 4: "5", 5: "5"}
 
 
-def _version(source: str, version: int | None) -> int:
-    return TASK_VERSION[source] if version is None else version
+def _version(source: str, version: int | None, protocol: str = "paper") -> int:
+    return TASK_VERSION[protocol][source] if version is None else version
+
+
+def _context(source: str, version: int | None, protocol: str) -> int:
+    """The context queries of a built-in task of this protocol, source and version."""
+    first = CONTEXT_FROM.get(protocol, {}).get(source)
+    return CONTEXT_QUERIES if first is not None and _version(source, version, protocol) >= first else 0
 
 
 def paper_id(source: str, sequence: str, condition: Condition, version: int | None = None) -> str:
-    """Id of a paper-protocol task, e.g. SAFL/KITTI00-T5R1.5-v0 (`version`: default the
-    source's current one, `TASK_VERSION`)."""
+    """Id of a paper-protocol task, e.g. SAFL/KITTI00-T5R1.5-v1 (`version`: default the
+    current one, `TASK_VERSION`)."""
     return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-{condition.name}-v{_version(source, version)}"
 
 
 def revisit_id(source: str, sequence: str, version: int | None = None) -> str:
     """Id of a revisit-protocol task, e.g. SAFL/KITTI08-Revisit-v0 (default: current version)."""
-    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-Revisit-v{_version(source, version)}"
+    return (f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-Revisit-"
+            f"v{_version(source, version, 'revisit')}")
 
 
 def bevplace_id(source: str, sequence: str, version: int | None = None) -> str:
-    """Id of a BEVPlace-protocol task, e.g. SAFL/BEVKITTI02-BEVPlace-v0 (default: current version)."""
-    return f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-BEVPlace-v{_version(source, version)}"
+    """Id of a BEVPlace-protocol task, e.g. SAFL/BEVKITTI02-BEVPlace-v1 (default: current version)."""
+    return (f"{NAMESPACE}/{SOURCE_LABEL[source]}{sequence}-BEVPlace-"
+            f"v{_version(source, version, 'bevplace')}")
 
 
-def _data_version(source: str, version: int | None) -> str | None:
+def _data_version(source: str, version: int | None, protocol: str = "paper") -> str | None:
     """The synthetic data version of a built-in task (None off the synthetic source)."""
-    return SYNTH_DATA_VERSIONS[_version(source, version)] if source == "synth" else None
+    return SYNTH_DATA_VERSIONS[_version(source, version, protocol)] if source == "synth" else None
 
 
-def _superseded_note(source: str, version: int | None) -> str:
-    if _version(source, version) == TASK_VERSION[source]:
+def _superseded_note(source: str, version: int | None, protocol: str = "paper") -> str:
+    current = TASK_VERSION[protocol][source]
+    if _version(source, version, protocol) == current:
         return ""
-    return f" (superseded: defined on synthetic data version {_data_version(source, version)})"
+    data = _data_version(source, version, protocol)
+    if data is not None and data != _data_version(source, current, protocol):
+        return f" (superseded: defined on synthetic data version {data})"
+    return (f" (superseded by v{current}: every query scored, the first {CONTEXT_QUERIES} on a "
+            "shortened trajectory)")
 
 
 def _paper(source: str, sequence: str, condition: Condition, version: int | None = None) -> TaskSpec:
@@ -119,6 +150,9 @@ def _paper(source: str, sequence: str, condition: Condition, version: int | None
     if source == "bev" and not condition.is_clean:
         what += (" (queries: the images resampled to the moved viewpoint, nearest neighbour; "
                  "what lies beyond the image is empty)")
+    context = _context(source, version, "paper")
+    if context:
+        what += f"; queries 0-{context - 1} are context only"
     return TaskSpec(
         id=paper_id(source, sequence, condition, version),
         source=source,
@@ -129,6 +163,7 @@ def _paper(source: str, sequence: str, condition: Condition, version: int | None
         tp_radius_m=PAPER_TP_RADIUS_M,
         fp_radius_m=PAPER_TP_RADIUS_M,
         data_version=_data_version(source, version),
+        context_queries=context,
         description=f"paper protocol, {what}{_superseded_note(source, version)}",
         map_config=None if source == "bev" else MapConfig(),
     )
@@ -144,17 +179,20 @@ def _revisit(source: str, sequence: str, version: int | None = None) -> TaskSpec
         tp_radius_m=REVISIT_TP_RADIUS_M,
         fp_radius_m=REVISIT_FP_RADIUS_M,
         window_s=REVISIT_WINDOW_S,
-        data_version=_data_version(source, version),
+        data_version=_data_version(source, version, "revisit"),
         description="revisit protocol, loop closure within the sequence"
-                    + _superseded_note(source, version),
+                    + _superseded_note(source, version, "revisit"),
         map_config=None if source == "bev" else MapConfig(),
     )
 
 
-def _bevplace(source: str, sequence: str) -> TaskSpec:
+def _bevplace(source: str, sequence: str, version: int | None = None) -> TaskSpec:
     database, queries = BEVPLACE_RANGES[sequence]
+    context = _context(source, version, "bevplace")
+    scored = (f"; queries {queries[0]}-{queries[0] + context - 1} are context only" if context
+              else "")
     return TaskSpec(
-        id=bevplace_id(source, sequence),
+        id=bevplace_id(source, sequence, version),
         source=source,
         sequence=sequence,
         protocol="bevplace",
@@ -163,8 +201,10 @@ def _bevplace(source: str, sequence: str) -> TaskSpec:
         query_frames=queries,
         tp_radius_m=BEVPLACE_TP_RADIUS_M,
         fp_radius_m=BEVPLACE_TP_RADIUS_M,
+        context_queries=context,
         description=(f"BEVPlace's protocol: database frames {database[0]}-{database[1] - 1}, queries "
-                     f"{queries[0]}-{queries[1] - 1}, a true place within 5 m, Recall@1"),
+                     f"{queries[0]}-{queries[1] - 1}, a true place within 5 m, Recall@1{scored}"
+                     + _superseded_note(source, version, "bevplace")),
         map_config=None if source == "bev" else MapConfig(),
     )
 
@@ -192,22 +232,59 @@ def register_builtin() -> None:
             _add(("revisit", *(("bev-revisit",) if source == "bev" else ())), _revisit(source, sequence))
     for sequence in BEVPLACE_RANGES:
         _add(("bev-bevplace",), _bevplace("bev", sequence))
-    for version in SYNTH_DATA_VERSIONS:  # superseded synthetic versions: registered, in no suite
-        if version == TASK_VERSION["synth"]:
-            continue
-        old = [_paper("synth", sequence, condition, version)
-               for sequence in PAPER_SOURCE_SEQUENCES["synth"] for condition in (*PAPER_CONDITIONS, CLEAN)]
-        old += [_revisit("synth", sequence, version) for sequence in REVISIT_SEQUENCES["synth"]]
-        for task in old:
-            register(task)
-            _SUPERSEDED.append(task.id)
+    old: list[TaskSpec] = []  # superseded versions: registered, in no suite
+    for version in SYNTH_DATA_VERSIONS:
+        if version < TASK_VERSION["paper"]["synth"]:
+            old += [_paper("synth", sequence, condition, version) for sequence
+                    in PAPER_SOURCE_SEQUENCES["synth"] for condition in (*PAPER_CONDITIONS, CLEAN)]
+        if version < TASK_VERSION["revisit"]["synth"]:
+            old += [_revisit("synth", sequence, version) for sequence in REVISIT_SEQUENCES["synth"]]
+    for source in ("kitti", "bev"):
+        old += [_paper(source, sequence, condition, version)
+                for version in range(TASK_VERSION["paper"][source])
+                for sequence in PAPER_SOURCE_SEQUENCES[source]
+                for condition in (*PAPER_CONDITIONS, CLEAN)]
+    old += [_bevplace("bev", sequence, version)
+            for version in range(TASK_VERSION["bevplace"]["bev"]) for sequence in BEVPLACE_RANGES]
+    for task in old:
+        register(task)
+        _SUPERSEDED.append(task.id)
 
 
 def superseded() -> list[str]:
-    """Ids of the built-in tasks of older versions (the synthetic tasks' v0, v1, v2 and v3):
-    registered, so that their records resolve, but in no suite; a synthetic one cannot be run
-    (`registry.check_data_version`)."""
+    """Ids of the built-in tasks of older versions: registered, so that their records resolve,
+    but in no suite. The synthetic tasks on older synthetic data (v0-v3) cannot be run
+    (`registry.check_data_version`); the paper and BEVPlace tasks that scored every query
+    (synthetic paper v4, KITTI and top-view paper v0, BEVPlace v0) still can."""
     return list(_SUPERSEDED)
+
+
+def predecessor(task_id: str) -> str | None:
+    """The superseded built-in task whose `successor` is `task_id` (None when there is none)."""
+    return next((old for old in _SUPERSEDED if successor(old) == task_id), None)
+
+
+def successor(task_id: str) -> str | None:
+    """The current built-in task that replaced `task_id` with the same data, views and ground
+    truth and only its leading queries made context (`TaskSpec.context_queries`), e.g.
+    SAFL/BEVKITTI00-T1R1-v0 -> SAFL/BEVKITTI00-T1R1-v1; None for any other id. A record of the
+    old task holds every per-query outcome the new one scores
+    (`safl_bench.results.derive.derive_record`)."""
+    import dataclasses
+
+    from safl_bench.tasks.registry import registry
+    from safl_bench.tasks.spec import make_id
+
+    old = registry.get(task_id)
+    if old is None or old.namespace != NAMESPACE or old.context_queries:
+        return None
+    newer = sorted((s for s in registry.values() if s.namespace == old.namespace
+                    and s.name == old.name and s.version > old.version), key=lambda s: s.version)
+    for new in newer:
+        if new.context_queries and dataclasses.replace(new, id=old.id, context_queries=0,
+                                                       description=old.description) == old:
+            return make_id(new.namespace, new.name, new.version)
+    return None
 
 
 def suite(name: str, source: str | None = None) -> list[str]:

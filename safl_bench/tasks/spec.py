@@ -91,6 +91,14 @@ class TaskSpec:
         same task a cell takes, not what the task is.
     data_version: the version of the synthetic data the task is defined on (source "synth" only;
         None there means the version this safl-bench generates, `synth.GENERATOR_VERSION`).
+    context_queries: how many of the first queries are context only: described and matched (the
+        sequence matcher's trajectories of later queries read their rows) but left out of every
+        measure, in both matching modes. The paper and BEVPlace protocols from task versions
+        synth v5, kitti v1 and bev v1 on set it to the paper's d_s = 10 (`CONTEXT_QUERIES`), so
+        that every scored query carries the default matcher's whole trajectory, as the authors'
+        code and OpenSeqSLAM score only such queries (issue #37: a shortened trajectory's mean
+        over fewer frames spreads wider, and query 0 set recall at 100 % precision in almost
+        every cell). 0 (earlier versions): every query is scored.
     map_config: every setting of the top-view maps rendered from scans (None for an image source,
         whose views are its images).
     """
@@ -111,6 +119,7 @@ class TaskSpec:
     fp_radius_m: float = 10.0
     window_s: float | None = None
     data_version: str | None = None
+    context_queries: int = 0
     description: str = ""
     namespace: str | None = field(init=False, repr=False, compare=False)
     name: str = field(init=False, repr=False, compare=False)
@@ -138,6 +147,10 @@ class TaskSpec:
         if self.n_seeds is not None and (isinstance(self.n_seeds, bool)
                                          or not isinstance(self.n_seeds, int) or self.n_seeds < 1):
             raise ConfigError(f"task {self.id}: n_seeds must be an integer >= 1, got {self.n_seeds!r}")
+        if (isinstance(self.context_queries, bool) or not isinstance(self.context_queries, int)
+                or self.context_queries < 0):
+            raise ConfigError(f"task {self.id}: context_queries must be an integer >= 0, "
+                              f"got {self.context_queries!r}")
         if self.protocol not in PROTOCOLS:
             raise ConfigError(
                 f"task {self.id}: protocol must be one of {PROTOCOLS}, got {self.protocol!r}"
@@ -215,6 +228,8 @@ class TaskSpec:
             out["query_frames"] = list(self.query_frames or ())
         if self.source == "synth" and self.data_version != FIRST_SYNTH_DATA_VERSION:
             out["data_version"] = self.data_version  # likewise: v0's fingerprints stay as they were
+        if self.context_queries:  # likewise: the definitions before it keep their fingerprints
+            out["context_queries"] = self.context_queries
         return out
 
     @property
