@@ -260,13 +260,20 @@ def superseded() -> list[str]:
 
 
 def predecessor(task_id: str) -> str | None:
-    """The superseded built-in task whose `successor` is `task_id` (None when there is none)."""
-    return next((old for old in _SUPERSEDED if successor(old) == task_id), None)
+    """The registered task whose `successor` is `task_id` (None when there is none)."""
+    from safl_bench.tasks.registry import registry
+
+    new = registry.get(task_id)
+    if new is None or not new.context_queries:
+        return None
+    return next((old.id for old in registry.values() if old.namespace == new.namespace
+                 and old.name == new.name and old.version < new.version
+                 and successor(old.id) == task_id), None)
 
 
 def successor(task_id: str) -> str | None:
-    """The current built-in task that replaced `task_id` with the same data, views and ground
-    truth and only its leading queries made context (`TaskSpec.context_queries`), e.g.
+    """The task (a later version of the same name) that replaced `task_id` with the same data,
+    views and ground truth and only its leading queries made context (`TaskSpec.context_queries`), e.g.
     SAFL/BEVKITTI00-T1R1-v0 -> SAFL/BEVKITTI00-T1R1-v1; None for any other id. A record of the
     old task holds every per-query outcome the new one scores
     (`safl_bench.results.derive.derive_record`)."""
@@ -276,7 +283,7 @@ def successor(task_id: str) -> str | None:
     from safl_bench.tasks.spec import make_id
 
     old = registry.get(task_id)
-    if old is None or old.namespace != NAMESPACE or old.context_queries:
+    if old is None or old.context_queries:
         return None
     newer = sorted((s for s in registry.values() if s.namespace == old.namespace
                     and s.name == old.name and s.version > old.version), key=lambda s: s.version)
