@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Opt-in mutation testing of the scoring code: metrics, evaluation, groundtruth, matching
-# (issue #24). Never part of `python -m pytest`. Needs the `mutation` extra:
+# Opt-in mutation testing of the scoring code: metrics, evaluation cell, groundtruth, matcher
+# (issue #24), the bootstrap intervals and the leaderboard's ranking rule (issue #37). Never
+# part of `python -m pytest`. Run it in a checkout nobody else is editing (it writes mutants/;
+# e.g. `git worktree add /tmp/mut HEAD`). Needs the `mutation` extra:
 #     pip install -e '.[test,mutation]'
 #     tools/mutation.sh            # a fresh run: mutants/ is rebuilt from the working tree
 #     tools/mutation.sh --resume   # keep mutants/ and its results (after an interrupted run)
