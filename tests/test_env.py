@@ -189,3 +189,19 @@ def test_streaming_agent_matches_the_batch_evaluation_paper(tiny_id: str, kitti_
 def test_agent_refuses_a_centred_trajectory() -> None:
     with pytest.raises(ConfigError, match="causal"):
         MatcherAgent(FlatDescriptor(), MatcherConfig(trajectory="centred"))
+
+
+def test_context_queries_are_shown_but_not_rewarded(loop_task: Task) -> None:
+    """A task whose first queries are context: the same observations and labels, reward 0 and
+    `scored` False for them, the usual reward after."""
+    spec = TaskSpec(id="Test/Loop-T0R0-v1", source="synth", sequence="00", step=1,
+                    context_queries=10)
+    pos, maps = loop_task.query_positions, loop_task.queries()
+    task = Task.from_arrays(spec, positions=pos, times=np.arange(len(pos)) / 10.0,
+                            database=maps, queries=maps)
+    env = TaskEnv(task=task)
+    env.reset()
+    for t in range(12):
+        _, reward, _, _, info = env.step(t)  # its own frame: a true positive
+        assert info["label"] == "tp" and info["scored"] == (t >= 10)
+        assert reward == (1.0 if t >= 10 else 0.0)

@@ -7,6 +7,15 @@ Orientation: the matcher's score is LOWER = better; every measure here reads a C
 What the measures read (`Outcomes`, one entry per scored query; the label layer that fills it
 is `safl_bench.evaluation.cell.score_matches` on `safl_bench.evaluation.groundtruth.GroundTruth`):
 
+Which queries are scored: those the task scores (all but its first ``context_queries``, the
+context of the paper and BEVPlace tasks' sequence matcher, `safl_bench.tasks.spec.TaskSpec`), less
+those an evaluation setting leaves out (``max_frames``, ``trim_queries``;
+`safl_bench.evaluation.cell.scored_queries`); the same queries for every method and both
+matching modes of a task. A scored query that a setting leaves UNANSWERED (the matcher reports
+no match: ``edge_queries="skip"`` with a longer ``ds`` or a centred trajectory, a revisit query
+whose trajectory has no candidate) stays in every measure as a query that reported none: it
+lowers recall over positives if it has a true place and ranks below every answer in the AUC.
+
 * ``has_candidate``: the query may match at least one database frame (revisit protocol: some
   frame is older than the time window; paper and BEVPlace protocols: always). A query without a
   candidate cannot be answered and is left out of EVERY measure (LoGG3D-Net skips such queries

@@ -54,14 +54,15 @@ are the paper's; `safl_bench.matching.presets` names whole sets of these setting
    them; ``n_terms`` records how many, ``complete`` flags full ones); ``edge_queries="skip"``
    reports no match for them (index -1, score +inf); with the centred trajectory these are the
    first ``ds - ds//2`` and the last ``ds//2`` queries (OpenSeqSLAM and the authors' code).
-   MEASURED CONSEQUENCE of "shorten" (the committed records' per-query outcomes, 2026-12-04): a
-   mean over fewer rows spreads wider, so its minimum over the database lies lower and the
-   first queries are a cell's most confident answers, right or wrong. With the paper preset,
-   the most confident wrong match is one of queries 0-9 in 718 of the 720 (method, condition,
-   seed) sequence cells of the paper protocol (real KITTI 00 and the synthetic default, seeds
-   0-4), mostly query 0, whose trajectory is its own frame; so it alone sets recall at 100 %
-   precision there (docs/guides/leaderboard.md gives the numbers; ``safl-bench explain`` shows
-   it per cell). Kept: the default is a protocol, changed only with a task version.
+   CONSEQUENCE of "shorten": a mean over fewer rows spreads wider, so its minimum over the
+   database lies lower and the first queries are a cell's most confident answers, right or
+   wrong; under task versions that scored them, the most confident wrong match was one of
+   queries 0-9 in almost every paper-protocol sequence cell, so it alone set recall at 100 %
+   precision (docs/reference/tasks.md, "Context queries", gives the before/after table
+   computed from the records). The matcher keeps "shorten" as the paper preset's setting; the
+   paper and BEVPlace tasks (synthetic v5, KITTI and top-view v1) make their first d_s = 10
+   queries context (`TaskSpec.context_queries`: matched, never scored), so no scored query of
+   the default preset has a shortened trajectory.
 5. Trajectory points whose database column falls outside ``[0, Ndb)``:
    ``out_of_range="exclude"`` (default, as OpenSeqSLAM, which pads with +inf) drops that
    (j, V) candidate; ``"clip"`` reads the first/last column instead.

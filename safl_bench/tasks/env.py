@@ -9,7 +9,9 @@ progress bars of a first run, which generates the synthetic data and renders the
 - action: Discrete(Ndb + 1): a database index, or Ndb (= `env.unwrapped.no_match`) for "no match".
 - reward: +1 for a true positive, -1 for a false positive (including a database frame the query
   may not match, e.g. one inside the revisit time window), 0 for an answer in the excluded band
-  and 0 for "no match" (misses are counted by recall in the batch metrics, not here).
+  and 0 for "no match" (misses are counted by recall in the batch metrics, not here); 0 for
+  any answer to one of the task's context queries (`TaskSpec.context_queries`: the first ten of
+  the paper and BEVPlace tasks, shown so that a sequence matcher has their rows, never scored).
 - `reset()` info: `database` (Ndb, H, W) maps, `database_positions` (Ndb, 2) m,
   `database_times` (Ndb,) s, plus the per-query keys below for query 0. The same arrays are
   attributes of `env.unwrapped` (`database`, `task`).
@@ -18,7 +20,8 @@ progress bars of a first run, which generates the synthetic data and renders the
 - `step()` info also carries the ground truth of the query just answered: `answered_index`,
   `label` ("tp", "fp", "excluded", "no_match"), `distance_m` of the answered match (nan for no
   match), `true_matches` (database indices within the true-positive radius among its
-  candidates), `true_positions` (their positions), `answered_position` (the query's position).
+  candidates), `true_positions` (their positions), `answered_position` (the query's position),
+  `scored` (False for a context query: its label is the truth, its reward 0).
 - the episode terminates after the last query; the final observation repeats the last query.
 - observations and infos are fresh copies (Gymnasium's rule: callers keep what they get);
   `env.unwrapped.database` is the read-only original, for agents that want no copy.
@@ -115,8 +118,12 @@ class TaskEnv(gymnasium.Env):
             code = int(truth.label_of(t, answer))
             label, reward = LABELS[code], float(code)
             distance = float(truth.distances(t, answer))
+        scored = t >= self.task.spec.context_queries
+        if not scored:
+            reward = 0.0
         true = truth.true_matches(t)
         info: dict[str, Any] = {
+            "scored": scored,
             "answered_index": t,
             "label": label,
             "distance_m": distance,
