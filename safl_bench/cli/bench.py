@@ -12,6 +12,8 @@
                                                  side) and against the compute bound, both ratios
   safl-bench bench seeds --bev-root DIR          five seeds of a cell against one (stable_afl@1,
                                                  bigan@1 on real 00), interval overhead
+  safl-bench bench main-job [--method NAME]       the README's main job from an empty cache and
+                                                 cached, wall time and load average
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -29,11 +31,11 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time, NAME or NAME@VERSION (repeatable; default: every registered "
                         "version; seeds: stable_afl@1, bigan@1)")
-    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v4; "
-                        "seeds: the cell run, default SAFL/BEVKITTI00-T1R1-v0)")
+    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v5; "
+                        "seeds: the cell run, default SAFL/BEVKITTI00-T1R1-v1)")
     parser.add_argument("--frames", type=int, default=None,
                         help="frames per timed batch-1 run (default 50; bevplace: 8)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
@@ -90,6 +92,14 @@ def main(args: argparse.Namespace) -> int:
         return _bevplace(args)
     if args.what == "seeds":
         return _seeds(args)
+    if args.what == "main-job":
+        from safl_bench.bench import main_job_bench
+
+        figures = main_job_bench.run(args.method[0] if args.method else "stable_afl")
+        print(main_job_bench.format_results(figures))
+        if args.json:
+            atomic_write_json(args.json, figures)
+        return 0 if figures.get("cached_s_returncode") == 0 else 1
     if args.what == "matcher":
         from safl_bench.bench import matching_bench
 
