@@ -302,11 +302,13 @@ def reference_replicates(seeds: list[Outcomes], replicates: int) -> dict[str, np
     return {name: v / k for name, v in total.items()}
 
 
-@pytest.mark.parametrize("n_seeds", [1, 3])
-def test_the_replicates_are_the_documented_two_level_block_bootstrap(n_seeds: int) -> None:
+@pytest.mark.parametrize(("n_seeds", "replicates"), [(1, 40), (3, 40), (3, 2), (5, 1)])
+def test_the_replicates_are_the_documented_two_level_block_bootstrap(n_seeds: int,
+                                                                     replicates: int) -> None:
+    # (few replicates: some seed is drawn by none, and the later seeds still are resampled)
     seeds = [random_outcomes(s, n=23 + s) for s in range(n_seeds)]
-    got = uncertainty.sample(seeds, replicates=40)
-    expected = reference_replicates(seeds, 40)
+    got = uncertainty.sample(seeds, replicates=replicates)
+    expected = reference_replicates(seeds, replicates)
     assert set(got.values) == set(expected)
     for name in expected:
         np.testing.assert_allclose(got.values[name], expected[name], rtol=1e-12, err_msg=name)
@@ -376,6 +378,7 @@ def test_an_interval_holds_its_point_and_is_deterministic() -> None:
     seeds = [tied_case(), mixed_case()]
     first = uncertainty.bootstrap(seeds, replicates=200)
     assert first == uncertainty.bootstrap(seeds, replicates=200)
+    assert first == uncertainty.sample(seeds, replicates=200).intervals()  # 200, not the default
     for name, cell in first.items():
         assert cell.low <= cell.mean <= cell.high, name
         assert cell.mean == pytest.approx((TIED_VALUES[name] + MIXED_VALUES[name]) / 2), name
@@ -538,6 +541,9 @@ def test_no_mark_for_a_single_cell_or_all_equal_values() -> None:
     # equal as shown to the best: tied, whatever the records say
     got = intervals.rank([cell(0, GOOD), cell(1, BAD, shown=1.0), cell(2, BAD)], "higher")
     assert got == {0: TIED, 1: TIED}
+    # ... and the cells below them are still compared with the best
+    got = intervals.rank([cell(0, GOOD), cell(1, BAD, shown=1.0), cell(2, NEAR)], "higher")
+    assert got == {0: TIED, 1: TIED, 2: TIED}
 
 
 def test_an_order_the_paired_difference_contradicts_is_not_resolved() -> None:
