@@ -70,7 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # --score refines the preset only when given (the paper preset's score is "min", as before)
     parser.set_defaults(score=None)
     add_parallel_arguments(parser, "build the views and evaluate the cells")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress: no bars on a terminal, no line per finished cell in a "
+                        "log (where stderr is not a terminal)")
 
 
 def matcher_config(score: str | None, items: list[str], preset: str = "paper") -> Any:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from safl_bench.common import progress
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation.groundtruth import EXCLUDED, TP, GroundTruth
 from safl_bench.evaluation.metrics import (
@@ -87,7 +88,11 @@ def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:
 def describe(method: Method, views: Any) -> tuple[np.ndarray, float]:
     """(descriptors, seconds of describing them): through the descriptor cache for methods that
     ask for it (`Method.cache_descriptors`; the seconds are then those measured when each view was
-    described), else directly."""
+    described), else directly. Through the cache describing is checkpointed in chunks (an
+    interrupted cell resumes from its last chunk) and the cell's progress counts each chunk
+    (`safl_bench.common.progress`); a method without the cache describes in one call, its
+    frames counted when it returns (chunking it would change its batching, and nothing would
+    keep the chunks)."""
     if getattr(method, "cache_descriptors", False) and method.input_kind == "topview":
         from safl_bench.methods.descriptor_cache import cached_describe
 
@@ -95,7 +100,9 @@ def describe(method: Method, views: Any) -> tuple[np.ndarray, float]:
         return desc, per_frame * len(desc)
     t0 = time.perf_counter()
     desc = method.describe(views)
-    return desc, time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    progress.advance(len(views))
+    return desc, seconds
 
 
 DatabaseMemo = dict[tuple[int, str], tuple[np.ndarray, float]]
@@ -124,6 +131,8 @@ def describe_database(method: Method, database: Any,
         if len(memo) >= _MEMO_LIMIT:
             memo.pop(next(iter(memo)))
         memo[key] = describe(method, database)
+    else:
+        progress.advance(len(database))
     return memo[key]
 
 
@@ -135,6 +144,7 @@ def difference_matrix(method: Method, queries: Any, database: Any, distance: str
     """Describe both sides and compare them (`distance`: "method" = `Method.distance`,
     "euclidean" = plain L2); returns (D, seconds spent describing, frames).
     `memo`: database descriptors described before in this process (`describe_database`)."""
+    progress.expect(len(queries) + len(database))
     d_db, s_db = describe_database(method, database, memo)
     d_q, s_q = describe(method, queries)
     describe_s = s_db + s_q

@@ -22,12 +22,21 @@ sequence open it once (its poses, times and decoded images are read once). Every
 is what it would be alone: methods describe each view independently of the others
 (`check_method`). `share_seeds=False` describes and times every seed on its own (what
 `safl-bench bench seeds` compares against).
+
+Progress (`RunOptions.progress`): on a terminal, a bar over the cells and, under it, one over the
+frames the cell in progress describes (`safl_bench.common.progress`; a cell of BEVPlace on a real
+sequence describes thousands of frames for minutes, which a bar of cells alone shows as `0/1`).
+Where stderr is not a terminal (a log file, CI) there are no bars, whose carriage-return
+redraws would fill the log, but one plain line per finished cell. Describing through the
+descriptor cache is checkpointed in chunks, so an interrupted cell loses at most one chunk of
+descriptors (`safl_bench.methods.descriptor_cache`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import sys
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from safl_bench.common import progress as frame_progress
 from safl_bench.common.parallel import JobResult, Parallel, run_jobs
 from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation.cell import DatabaseMemo, evaluate_method
@@ -82,7 +92,7 @@ class RunOptions:
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
     timing_frames: int = 20
     timing_repeats: int = 5
-    progress: bool = True
+    progress: bool = True  # bars on a terminal, else a line per finished cell (module docstring)
     share_seeds: bool = True  # time a cell once and describe its database once (`run_grid`)
 
 
@@ -490,32 +500,54 @@ def run_grid(
     if evaluated:
         say(f"note: {len(evaluated)} cell(s) evaluated by an interrupted run are timed, not "
             "evaluated again")
-    tasks = _prepare_views(cells, todo, parallel, options.progress, failed, outcomes)
+    bars = options.progress and frame_progress.interactive(sys.stderr)
+    lines = options.progress and not bars  # a log or CI: a line per finished cell, no bars
+    if lines and todo:
+        say(f"preparing the views of {len(todo)} cell(s)")
+    tasks = _prepare_views(cells, todo, parallel, bars, failed, outcomes)
     names = "/".join(m.name for m in methods)
 
+    def line(k: int, n: int, i: int, what: str) -> None:
+        method, task_id, _ = cells[i]
+        label = task_id if len(methods) == 1 else f"{method.name} on {task_id}"
+        say(f"[{k}/{n}] {label} seed {outcomes[i].seed if i in outcomes else todo[i]}: {what}")
+
     if parallel is None or parallel.serial:
-        bar = tqdm(sorted([*evaluated, *tasks]), desc=names, unit="task", disable=not options.progress)
-        for i in bar:
+        order = sorted([*evaluated, *tasks])
+        bar = tqdm(order, desc=names, unit="cell", disable=not bars)
+        for k, i in enumerate(bar, 1):
             method, task_id, opts = cells[i]
             bar.set_postfix_str(task_id)
+            frames = _CellFrames(f"{task_id} frames", bars)
+            t0 = time.perf_counter()
             try:
                 if i in evaluated:
                     outcomes[i] = finish(i, evaluated[i])
                 else:  # popped: its views leave memory with the cell
                     task = tasks.pop(i)
-                    cell = _evaluate(method, spec(task_id), task, opts, "this process", memo)
+                    with frames, frame_progress.reporting(frames):
+                        cell = _evaluate(method, spec(task_id), task, opts, "this process", memo)
                     outcomes[i] = finish(i, cell, task)
             except SaflError as exc:
                 outcomes[i] = failed(i, str(exc))
+            if lines:
+                line(k, len(order), i, f"{outcomes[i].status} in {time.perf_counter() - t0:.1f} s"
+                     + (f" ({frames.done} frames)" if frames.done else ""))
         return [outcomes[i] for i in range(len(cells))]
 
     where = parallel.describe()
     order = sorted(tasks)  # the workers open their own tasks
     tasks.clear()
-    bar = tqdm(total=len(order), desc=f"{names} ({where})", unit="task", disable=not options.progress)
+    bar = tqdm(total=len(order), desc=f"{names} ({where})", unit="cell", disable=not bars)
+
+    back: list[int] = []  # the cells come back in the order they finish
 
     def keep(j: int, result: JobResult) -> None:  # in this process, as each cell comes back
         bar.update(1)
+        back.append(j)
+        if lines:
+            line(len(back), len(order), order[j],
+                 "evaluated" if result.error is None else "failed on its worker")
         if result.error is None:
             evaluated[order[j]] = result.value
             write_evaluated(options.results_dir, result.value)
@@ -534,6 +566,39 @@ def run_grid(
         except SaflError as exc:
             outcomes[i] = failed(i, str(exc))
     return [outcomes[i] for i in range(len(cells))]
+
+
+class _CellFrames:
+    """The frames of one cell (`safl_bench.common.progress.FrameProgress`): counted for its
+    line in a log, and shown by a bar under the grid's (removed when the cell ends) when `bar`."""
+
+    def __init__(self, label: str, bar: bool) -> None:
+        self.label, self.bar = label, bar
+        self.total = self.done = 0
+        self._bar: Any = None
+
+    def expect(self, n: int) -> None:
+        self.total += n
+        if self.bar and self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=self.total, desc=self.label, unit="frame", leave=False)
+        elif self._bar is not None:
+            self._bar.total = self.total
+            self._bar.refresh()
+
+    def advance(self, n: int) -> None:
+        self.done += n
+        if self._bar is not None:
+            self._bar.update(n)
+
+    def __enter__(self) -> _CellFrames:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
 
 
 def _prepare_views(
