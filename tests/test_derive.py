@@ -100,3 +100,16 @@ def test_what_cannot_be_derived_is_refused(pair, bev_root, tmp_path):
     out = runner.run_cell(make_method("sad"), new_id, options(bev_root, tmp_path / "bad"),
                           log=said.append)
     assert out.status == "computed" and any("cannot be derived from" in s for s in said)
+
+
+def test_the_leaderboard_names_old_versions_and_tables_them_apart(pair, bev_root, tmp_path, capsys):
+    old_id, new_id = pair
+    sad = make_method("sad")
+    runner.run_cell(sad, old_id, options(bev_root, tmp_path / "records"))
+    runner.run_cell(sad, new_id, options(bev_root, tmp_path / "records"))  # both in one folder
+    assert main(["leaderboard", "--out", str(tmp_path), "--no-figures", "--no-site"]) == 0
+    err = capsys.readouterr().err
+    notes = [line for line in err.splitlines() if "replaced" in line]
+    assert len(notes) == 1 and old_id in notes[0] and "records migrate" in notes[0]
+    tables = {p.name for p in (tmp_path / "tables").rglob("*.md")}
+    assert any("-v0-" in t for t in tables) and any("-v1-" in t for t in tables)

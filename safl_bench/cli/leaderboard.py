@@ -106,6 +106,13 @@ def main(args: argparse.Namespace) -> int:
     for problem in problems:
         severity = "error" if problem.corrupt else "warning"
         print(f"safl-bench: {severity}: skipped record {problem}", file=sys.stderr)
+    from safl_bench.results.derive import superseded_note
+
+    for folder, found in ((results, records), (out / "preset-records", preset_records),
+                          (out / SELECTED_RECORDS, selected)):
+        note = superseded_note(found, folder)
+        if note is not None:
+            print(f"safl-bench: note: {note}", file=sys.stderr)
     report = build_leaderboard(
         records,
         out,

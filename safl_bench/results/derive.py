@@ -178,3 +178,19 @@ def migrate(results_dir: str | Path, *, remove: bool = False, force: bool = Fals
             except OSError:
                 pass
     return Migration(derived, removed, kept)
+
+
+def superseded_note(records: list[ResultRecord], folder: str | Path) -> str | None:
+    """One line naming the records of superseded task versions among `records` (read as what
+    they are, in tables of their own version, never beside the current versions), and the
+    command that derives the current ones; None when there are none."""
+    from safl_bench.tasks.builtin import successor
+
+    old = sorted({r.task.id for r in records if successor(r.task.id) is not None})
+    if not old:
+        return None
+    n = sum(successor(r.task.id) is not None for r in records)
+    shown = ", ".join(old[:3]) + (f" and {len(old) - 3} more" if len(old) > 3 else "")
+    return (f"{n} records in {folder} are of task versions a newer one replaced ({shown}): they are "
+            f"tabled under their own version, never beside the current one; `safl-bench records "
+            f"migrate {folder}` derives the current versions' records from them")
