@@ -161,6 +161,16 @@ def test_auc_counts_a_tied_correct_and_wrong_pair_half() -> None:
     assert point(o)["auc"] == 1.0 == metrics.evaluate_outcomes(o).roc_auc
 
 
+def test_the_authors_precision_is_reached_at_exactly_99_of_100() -> None:
+    # the most confident match wrong, then 99 correct: precision 0.99 only at the lowest
+    # threshold, which the authors' reading takes (>= 0.99): all 99 correct matches
+    o = metrics.outcomes(np.arange(100, 0, -1.0), [0] + [1] * 99, [True] * 100)
+    got = point(o)
+    assert got["authors_recall_at_99p"] == 1.0 == metrics.evaluate_outcomes(o).authors_recall_at_99p
+    assert got["recall_at_100_precision"] == 0.0 and got["f1_max"] == pytest.approx(198 / 200)
+    assert_agrees_with_metrics(o, got)
+
+
 def test_the_query_order_of_tied_confidences_changes_nothing() -> None:
     o = tied_case()
     assert o.true_rank is not None
