@@ -562,6 +562,16 @@ def test_an_order_the_paired_difference_contradicts_is_not_resolved() -> None:
     assert got == {0: TIED, 1: TIED}
 
 
+def test_the_best_is_bold_only_when_its_point_difference_is_positive(monkeypatch) -> None:
+    # an interval that excludes 0 around a point difference of 0 (a percentile interval need
+    # not hold its point) or below it does not resolve the order
+    for mean in (0.0, -0.1):
+        monkeypatch.setattr(intervals, "_difference", lambda a, b, m=mean: Interval(m, 0.1, 0.2, 1, 9))
+        assert intervals.rank([cell(0, GOOD), cell(1, BAD)], "higher") == {0: TIED, 1: TIED}
+    monkeypatch.setattr(intervals, "_difference", lambda a, b: Interval(0.01, 0.1, 0.2, 1, 9))
+    assert intervals.rank([cell(0, GOOD), cell(1, BAD)], "higher") == {0: BEST}
+
+
 def test_a_difference_that_cannot_be_computed_is_a_tie() -> None:
     # no interval for the measure
     assert intervals.rank([cell(0, GOOD, measure=None), cell(1, BAD)], "higher") == {0: TIED, 1: TIED}
@@ -591,6 +601,9 @@ def test_a_cells_bootstrap_is_computed_once_and_kept_for_its_records(monkeypatch
     assert first is not None and first.n_seeds == 2 and first.n_queries == 20
     assert intervals.cell_sample(GOOD[::-1], "sequence") is first  # seed order, not list order
     assert intervals.cell_sample(GOOD, "single_frame") is not first
+    other = intervals.cell_sample(BAD, "sequence")  # another cell of as many seeds: kept beside
+    assert intervals.cell_sample(GOOD, "sequence") is first
+    assert intervals.cell_sample(BAD, "sequence") is other
     assert first.points["recall_at_1"] == 1.0 and math.isnan(first.points["auc"])
     # an entry whose records are not these (an id reused by another object) is not theirs
     fresh = [record("fresh", answered(20, False), 0)]
