@@ -106,7 +106,7 @@ def test_a_cell_timed_on_two_hosts_shows_its_lowest_seeds_timing_and_says_so() -
                on(make_record("sad", seed=1, ms=3.0), "avx2 fma avx512f")]
     timing = _table(records, time_table)
     assert _rows(timing.markdown())[1:] == ["| bevplace | 1 | 97.00 (seed 0) |",
-                                           "| sad | 1 | 3.00 [3.00, 3.00] |"]
+                                           "| sad | 1 | 3.00 (1 timing) |"]
     note = next(n for n in timing.notes if "different machines" in n)
     assert "bevplace v1, T1R1: Test CPU (2 cores; avx2 fma avx512f) / Test CPU (2 cores; avx2 fma)" in note
     assert "sad" not in note
@@ -425,6 +425,13 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
     assert readme_block(report.headline, report.headline_records, README_LINK) in readme
     side, rel = report.table2[min(report.table2)]
     assert table2.readme_block(side, rel) in readme
+    # and so are the guides' generated blocks (`safl_bench.leaderboard.guides`)
+    from safl_bench.leaderboard.guides import blocks
+
+    for block, text in blocks(report):
+        guide = (REPO_BOARD.parent / block.guide).read_text(encoding="utf-8")
+        assert block.start in guide, f"{block.guide}: the {block.name} block's markers are gone"
+        assert text in guide, f"{block.guide}: the {block.name} block is stale; run `safl-bench leaderboard`"
 
 
 @pytest.mark.slow
@@ -464,8 +471,9 @@ def test_real_kitti_paper_tables_gain_one_table_by_matcher_preset(tmp_path) -> N
     build_leaderboard(paper, tmp_path / "lb", figures=False, preset_records=authors)
     md = (tmp_path / "lb/tables/kitti-top-view-images/paper-00-v0-presets-recall.md").read_text()
     rows = _rows(md)
-    assert rows[0] == "| Method | Version | Matcher | T1R1 | T5R1 |"
-    assert rows[1:] == ["| sad | 1 | authors | 40.0 | 40.0 |", "| sad | 1 | paper | 0.0 | 0.0 |"]  # sorted by name
+    assert rows[0] == "| Method | Version | Matcher · scored queries | T1R1 | T5R1 |"
+    assert rows[1:] == ["| sad | 1 | authors · 100 queries | 40.0 | 40.0 |",
+                        "| sad | 1 | paper · 100 queries | 0.0 | 0.0 |"]  # sorted by name
     assert "Sequence matcher by preset" in (tmp_path / "lb/index.md").read_text()
 
 

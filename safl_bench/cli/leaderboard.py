@@ -11,7 +11,8 @@ figures, the records of checkpoints selected on the test set (selected-records/:
 Table II, in rows of their own) and Table II's variants (experiments/table2/<name>/: records with
 one thing changed and a variant.json naming it), so running the command at the root of a safl-bench checkout rebuilds the committed
 leaderboard exactly. It also writes the web pages (OUT/site/index.html, opened from disk) and,
-when OUT is a checkout's leaderboard/, the headline block of that checkout's README.md.
+when OUT is a checkout's leaderboard/, the headline block of that checkout's README.md and the
+generated blocks of its guides (`safl_bench.leaderboard.guides`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import sys
 from pathlib import Path
 
 from safl_bench.leaderboard import build_leaderboard, table2
+from safl_bench.leaderboard.guides import update_guides
 from safl_bench.leaderboard.headline import update_readme
 from safl_bench.leaderboard.readme import replace_block
 from safl_bench.matching.presets import label
@@ -148,6 +150,8 @@ def main(args: argparse.Namespace) -> int:
             block = table2.readme_block(side, rel)
             if replace_block(readme, table2.README_START, table2.README_END, block, "Table II"):
                 print(f"README Table II: {readme}")
+        for guide in update_guides(out.parent, report):
+            print(f"guide blocks: {guide}")
     # built from the other records; a record that is not valid (bad JSON, against the schema) is
     # an error the user has to fix, so the command says so in its status
     return 2 if any(problem.corrupt for problem in problems) else 0

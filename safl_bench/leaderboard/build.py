@@ -61,8 +61,9 @@ UNKNOWN_SOURCE = "data source not recorded in the log"
 #: What every table showing a recall says about it (`safl_bench.evaluation.metrics` defines each measure;
 #: the text names it by its old path, which still imports, so the committed tables stay byte-identical).
 RECALL_NOTE = (
-    f"Recall is over the queries with a true place (the same for every method on a task: fixed "
-    f"by the ground truth), metrics version {METRICS_VERSION} (`safl_bench.metrics`); recall over "
+    f"Recall is over the scored queries with a true place (fixed by the ground truth on the "
+    f"scored queries, which the note on them names), metrics version {METRICS_VERSION} "
+    f"(`safl_bench.metrics`); recall over "
     "correct matches (the paper's authors' and VPR-Bench's convention) is in the `_of_correct` "
     "columns of tables/all-results.csv.")
 

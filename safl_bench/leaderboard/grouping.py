@@ -140,13 +140,16 @@ class Cell:
     """One table cell over the seeds it has records of.
 
     `mean` is None when the metric is undefined for some seed (e.g. a task without positives).
-    `low`, `high`: its 95 % interval (None when none can be computed); `seeds`: its seeds.
+    `low`, `high`: its 95 % interval (None when none can be computed); `seeds`: its seeds;
+    `measurements`: how many distinct measurements its seeds' values are (a timing the run took
+    once and every seed's record carries is one), None where each seed is its own (scores).
     """
 
     mean: float | None
     low: float | None = None
     high: float | None = None
     seeds: frozenset[int] = frozenset()
+    measurements: int | None = None
 
     @property
     def n_seeds(self) -> int:

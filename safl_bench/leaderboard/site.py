@@ -267,8 +267,47 @@ def _table2_section(report: BuildReport, key: TableKey | None) -> str:
             f"<h2>{_e(table2.TITLE)}</h2><p>{_inline_code(table2.INTRO)}</p>"
             f'<p class="meta"><a class="source-md" href="../{_e(md)}">Markdown</a> · '
             f'<a href="../{_e(md[:-3] + ".csv")}">CSV</a></p>'
-            f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
-            f'</div><ul class="notes">{summary}</ul>{extra}</section>')
+            + _table2_grid(rows) +
+            f'<h3>Cell by cell, both measures</h3><div class="scroll"><table><thead><tr>{head}</tr></thead>'
+            f'<tbody>{body}</tbody></table></div><ul class="notes">{summary}</ul>{extra}</section>')
+
+
+def _table2_grid(rows: Sequence[table2.Row]) -> str:
+    """Table II in the paper's own layout (`table2.grid`, the README's): methods × the twelve
+    conditions, the paper's row and under it each row of ours (version, weights), our mean over
+    the interval; a value whose interval misses the paper's is marked. Narrow enough for a
+    1400-pixel window without scrolling sideways (labels wrap, intervals under the means)."""
+    measure, title = table2.MEASURES[0]
+    groups: dict[tuple[str, str, str], dict[str, table2.Row]] = {}
+    for row in rows:
+        groups.setdefault((row.method, row.version, row.weights), {})[row.condition] = row
+    head = ('<th scope="col">Method</th><th scope="col">Row</th>'
+            + "".join(f'<th scope="col">{_e(c)}</th>' for c in table2.CONDITIONS))
+    body = []
+    for name in table2.PUBLISHED:
+        ours = [(k, v) for k, v in groups.items() if k[0] == name]
+        paper = "".join(f'<td class="num">{table2.PUBLISHED[name][c]:.1f}</td>' for c in table2.CONDITIONS)
+        body.append(f'<tr class="paper"><th scope="row" rowspan="{1 + len(ours)}">'
+                    f"{_e(table2.PAPER_NAMES[name])}</th><td class=\"who\">paper (Table II)</td>{paper}</tr>")
+        for (_, version, weights), by_condition in ours:
+            cells = []
+            for condition in table2.CONDITIONS:
+                cell = by_condition.get(condition)
+                iv = cell.ours.get(measure) if cell is not None else None
+                if cell is None or iv is None:
+                    cells.append('<td class="num">—</td>')
+                    continue
+                outside = cell.inside(measure) is False
+                cls = "num outside" if outside else "num"
+                tip = (f"paper {cell.paper:.1f}; ours {iv.format(100.0)}: the paper's value lies "
+                       f"{'outside' if outside else 'inside'} our interval")
+                cells.append(f'<td class="{cls}" title="{_e(tip)}">{iv.mean * 100:.1f}'
+                             f'<span class="interval">[{iv.low * 100:.1f}, {iv.high * 100:.1f}]</span></td>')
+            body.append(f'<tr><td class="who">@{_e(version)} · {_e(weights)}</td>{"".join(cells)}</tr>')
+    return (f"<h3>In the paper's layout: {_e(title)}</h3>"
+            "<p class=\"meta\">Each method: the paper's row, then ours (mean over the seeds, its 95 % "
+            "interval under it); red: the paper's value lies outside our interval.</p>"
+            f'<table class="t2grid"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>')
 
 
 def _cell(table: Table, i: int, j: int, fmt: ValueFormat, mark: str | None,
@@ -436,6 +475,8 @@ th[aria-sort=ascending]::after{content:" ▲";font-size:.7em}th[aria-sort=descen
 tbody tr:nth-child(even){background:#fafbfc}tbody tr:hover{background:#eef4ff}td.cell{cursor:help}
 td.cell:focus{outline:2px solid var(--accent)}.interval{display:block;font-size:.72rem;color:var(--muted)}
 td.outside{color:var(--bad);font-weight:600}.table2 th{cursor:default}
+.t2grid td,.t2grid th{padding:.15rem .35rem}.t2grid td.num{text-align:right}.t2grid td.who{white-space:normal;min-width:9rem;max-width:15rem;font-size:.78rem}
+.t2grid tr.paper td{background:var(--head);font-weight:600}.t2grid tbody th{text-align:left;vertical-align:top;white-space:normal;max-width:8rem}
 .notes{color:var(--muted);font-size:.8rem;max-width:80rem;overflow-wrap:anywhere}.shown{color:var(--muted);font-size:.8rem;margin:.2rem 0}
 .figures{display:flex;flex-wrap:wrap;gap:.6rem}figure{margin:0;max-width:420px}figure img{max-width:100%;border:1px solid var(--line)}
 figcaption{font-size:.78rem;color:var(--muted)}.placeholder{width:320px;height:200px;display:flex;align-items:center;justify-content:center;text-align:center;padding:1rem;border:2px dashed var(--bad);color:var(--bad);background:#fff5f5}

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
+import numpy as np
 import pandas as pd
 
 from safl_bench.leaderboard import intervals
@@ -64,7 +65,9 @@ class Table:
 
     `marks`: (row, column) -> `intervals.BEST` (bold: best beyond the noise) or `intervals.TIED`
     (tied for best); `spread`: what a cell's bracket is ("bootstrap": the 95 % interval over
-    seeds and queries; "range": the lowest and highest of the seeds' values)."""
+    seeds and queries; "range": the lowest and highest of the seeds' values; "timings": the
+    lowest and highest of the cell's distinct timings, `Cell.measurements` of them, a cell timed
+    once showing its one timing as such, `ONE_TIMING`)."""
 
     title: str
     key: TableKey
@@ -98,6 +101,8 @@ class Table:
         parts = []
         if cell.low is not None and cell.high is not None:
             parts.append(f"[{fmt.number(cell.low)}, {fmt.number(cell.high)}]")
+        if cell.measurements is not None and cell.measurements < cell.n_seeds:
+            parts.append(ONE_TIMING if cell.measurements == 1 else f"({cell.measurements} timings)")
         if cell.seeds and cell.seeds != self.seeds:
             parts.append(f"(seed {format_seeds(cell.seeds)})")
         return " ".join(parts)
@@ -147,6 +152,9 @@ class Table:
             data[f"{column} high"] = [_csv_value(c, fmt, "high") for c in cells]
             if any(c is not None and c.seeds != self.seeds for c in cells):
                 data[f"{column} seeds"] = ["" if c is None else format_seeds(c.seeds) for c in cells]
+            if self.spread == "timings":
+                data[f"{column} timings"] = [
+                    "" if c is None or c.measurements is None else str(c.measurements) for c in cells]
             if fmt.better is not None:
                 data[f"{column} rank"] = [self.marks.get((i, j), "") for i in range(len(self.rows))]
         data["Seeds"] = [format_seeds(self.seeds)] * len(self.rows)
@@ -170,10 +178,19 @@ def _csv_value(cell: Cell | None, fmt: ValueFormat, which: str) -> str:
     return "" if value is None else fmt.number(value)
 
 
+#: How a cell whose seeds carry one timing says so, in place of a bracket of zero width.
+ONE_TIMING = "(1 timing)"
+
+
 def seeds_sentence(table: Table) -> str:
     """What a cell's value and bracket are, and what bold and '≈' mean."""
     seeds = format_seeds(table.seeds)
-    if table.spread == "range":
+    if table.spread == "timings" and len(table.seeds) > 1:
+        return (f"Seeds {seeds}: each cell the mean of its seeds' distinct timings [lowest, "
+                f"highest]; a cell whose seeds' records carry one timing shows it alone, marked "
+                f"'{ONE_TIMING}', and one with fewer distinct timings than seeds says how many; a "
+                f"cell with other seeds names them. Missing cells show {MISSING}.")
+    if table.spread in ("range", "timings"):
         if len(table.seeds) == 1:
             return f"Seed {seeds}. Missing cells (not run) show {MISSING}."
         return (f"Mean over seeds {seeds} [lowest, highest of the seeds' records]; a cell with "
@@ -238,9 +255,12 @@ def _build(
     extract: Extractor,
     notes: Iterable[str] = (),
     fewer_seeds: str = _FEWER_SEEDS,
+    combine: Callable[[dict[int, float | None]], Cell | None] | None = None,
 ) -> Table:
     """The table of `records` (`extract` gives each record's values). `fewer_seeds` ends the note
-    on a cell over fewer seeds than the table's: what to make of it and how to fill it."""
+    on a cell over fewer seeds than the table's: what to make of it and how to fill it.
+    `combine`: makes a cell of its seeds' values in place of their mean and bracket (the time
+    table's, `_timing_cell`)."""
     from safl_bench.methods.training_data import record_seen
 
     seeds = seed_set(records)
@@ -264,6 +284,9 @@ def _build(
     for row in rows:
         line: list[Cell | None] = []
         for column in columns:
+            if combine is not None:
+                line.append(combine(values.get((row, column), {})))
+                continue
             cell = aggregate(values.get((row, column), {}))
             if cell is not None and cell.mean is not None and with_intervals:
                 cell = _with_interval(cell, values[(row, column)],
@@ -393,6 +416,91 @@ def _metric(name: str) -> Callable[[Metrics], float | None]:
     return get
 
 
+@dataclass(frozen=True, order=True)
+class QuerySet:
+    """The queries a record's measures are over (`safl_bench.evaluation.cell.scored_queries`):
+    queries `first` to `last` (0-based, inclusive) of the `frames` it matched, which are the
+    task's first `frames` when the matcher's `max_frames` cut it (`limited`)."""
+
+    first: int
+    last: int
+    frames: int
+    limited: bool
+
+    @property
+    def text(self) -> str:
+        """E.g. 'queries 10–294 of the first 300 frames', 'queries 10–1135 of 1136'."""
+        of = f"the first {self.frames} frames" if self.limited else str(self.frames)
+        return f"queries {self.first}–{self.last} of {of}"
+
+
+def query_set(record: ResultRecord) -> QuerySet | None:
+    """The queries `record` was scored on, from its task spec (`n_queries`, `context_queries`)
+    and matcher settings (`max_frames`, `trim_queries`); None when they cannot be read or do not
+    give the record's own `n_queries` (then its count alone names them)."""
+    from safl_bench.errors import ConfigError
+    from safl_bench.evaluation.cell import scored_queries
+    from safl_bench.matching.settings import EvaluationConfig
+
+    spec = record.task.spec
+    n, context = spec.get("n_queries"), spec.get("context_queries") or 0
+    try:
+        settings = EvaluationConfig.from_dict(record.matcher)
+        if not isinstance(n, int) or not isinstance(context, int):
+            return None
+        frames = n if settings.max_frames is None else min(n, settings.max_frames)
+        scored = scored_queries(frames, settings.trim_queries, context)
+    except (ConfigError, TypeError):
+        return None
+    counts = {result.metrics.n_queries for result in record.results.values()}
+    if counts != {scored.stop - scored.start}:
+        return None
+    return QuerySet(scored.start, scored.stop - 1, frames, frames < n)
+
+
+def queries_text(record: ResultRecord) -> str:
+    """The queries `record` was scored on, in words (`QuerySet.text`, else their count)."""
+    queries = query_set(record)
+    if queries is not None:
+        return queries.text
+    return f"{_count_range(m.metrics.n_queries for m in record.results.values())} queries"
+
+
+def _count_range(values: Iterable[int]) -> str:
+    found = sorted(set(values))
+    return str(found[0]) if len(found) == 1 else f"{found[0]}–{found[-1]}"
+
+
+def query_set_notes(records: Iterable[ResultRecord], column: Callable[[ResultRecord], str],
+                    part: str) -> list[str]:
+    """A note naming the queries a table's cells are scored on and how many have a true place
+    (the recall's denominator): one line when every cell shares them, else per `part` (a
+    column, or a row group such as a matcher preset) as `column(record)` names it."""
+    sets: dict[str, dict[str, list[ResultRecord]]] = defaultdict(lambda: defaultdict(list))
+    for r in records:
+        sets[column(r)][queries_text(r)].append(r)
+    if not sets:
+        return []
+
+    def said(what: str, recs: list[ResultRecord]) -> str:
+        positives = _count_range(m.metrics.n_positives for r in recs for m in r.results.values())
+        return f"{what}, {positives} with a true place"
+
+    lines = {name: "; ".join(said(w, recs) for w, recs in sorted(by.items())) for name, by in sets.items()}
+    if len(set(lines.values())) == 1 and all(len(by) == 1 for by in sets.values()):
+        return [f"Scored queries, the same in every cell and for every method: {next(iter(lines.values()))}."]
+    groups: dict[str, list[str]] = defaultdict(list)
+    for name in sorted(lines):
+        groups[lines[name]].append(name)
+    said_per = "; ".join(f"{', '.join(names)}: {line}"
+                         for line, names in sorted(groups.items(), key=lambda kv: kv[1]))
+    note = f"Scored queries per {part} (not the same across {part}s: compare cells of one): {said_per}."
+    if part == "preset":
+        note += (" A preset's `max_frames` and `trim_queries` choose them (`safl-bench list "
+                 "matchers`); each row's Matcher cell names its set.")
+    return [note]
+
+
 RECALL_FORMAT = ValueFormat(scale=100.0, decimals=1, better="higher")
 AUC_FORMAT = ValueFormat(scale=1.0, decimals=3, better="higher")
 F1_FORMAT = ValueFormat(scale=1.0, decimals=3, better="higher")
@@ -425,7 +533,7 @@ def paper_metric_table(
         columns=columns,
         formats=[fmt] * len(columns),
         extract=extract,
-        notes=notes,
+        notes=[*notes, *query_set_notes(records, lambda r: r.task.condition or "", "condition")],
     )
     return _label_modes(table)
 
@@ -445,9 +553,12 @@ def recall_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str
 def preset_table(key: TableKey, records: list[ResultRecord], *, metric: str = "recall_at_100_precision",
                  title: str = "Sequence matcher by preset: recall at 100 % precision (%)",
                  notes: Iterable[str] = ()) -> Table:
-    """Rows = (method, version, matcher preset), columns = noise conditions, values = `metric` of
-    the sequence matcher: how much of a Table II cell comes from the matcher's variant. `records`
-    may hold several presets' records of one task (from separate results folders)."""
+    """Rows = (method, version, matcher preset and its scored queries), columns = noise
+    conditions, values = `metric` of the sequence matcher: how much of a Table II cell comes from
+    the matcher's variant. `records` may hold several presets' records of one task (from separate
+    results folders). A preset's evaluation settings (`max_frames`, `trim_queries`) choose the
+    queries it scores, so each row names its query set (`QuerySet`) and a note gives each set's
+    count: a column holds rows scored on different queries, ranked only within one preset."""
     from safl_bench.matching.presets import label
 
     get = _metric(metric)
@@ -456,11 +567,14 @@ def preset_table(key: TableKey, records: list[ResultRecord], *, metric: str = "r
     def extract(record: ResultRecord) -> Iterable[Value]:
         result = record.results.get("sequence")
         if result is not None:
-            yield Value((record.method.name, record.method.version, label(record.matcher)),
+            matcher = f"{label(record.matcher)} · {queries_text(record)}"
+            yield Value((record.method.name, record.method.version, matcher),
                         record.task.condition or "", get(result.metrics), "sequence", metric)
 
-    table = _build(key, records, title=title, row_header=("Method", "Version", "Matcher"),
-                   columns=columns, formats=[RECALL_FORMAT] * len(columns), extract=extract, notes=notes)
+    table = _build(key, records, title=title,
+                   row_header=("Method", "Version", "Matcher · scored queries"),
+                   columns=columns, formats=[RECALL_FORMAT] * len(columns), extract=extract,
+                   notes=[*notes, *query_set_notes(records, lambda r: label(r.matcher), "preset")])
     table.notes = [n for n in table.notes if not n.startswith("Matcher settings differ")]
     table.notes.append("Each preset's every setting: `safl-bench list matchers`.")
     return table
@@ -489,10 +603,13 @@ _PROVENANCE = ("timed by the run of ", "rescored with metrics version ", "the ce
 def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] = ()) -> Table:
     """The paper's Table III: feature inference time per frame (ms, batch 1, median).
 
-    A cell's timing is the mean over its seeds timed on the host of its lowest seed: seeds run
-    later on another host (CPU model or vector instruction sets) carry that host's timing, and a
-    mean over hosts is no host's speed. Such cells are named in a note, and their other-host seeds
-    are left out of this table only."""
+    A cell's timing is the mean of its seeds' distinct timings on the host of its lowest seed:
+    seeds run later on another host (CPU model or vector instruction sets) carry that host's
+    timing, and a mean over hosts is no host's speed. Such cells are named in a note, and their
+    other-host seeds are left out of this table only. A run times a (method, task) cell once and
+    its other seeds' records carry that timing (`Timings`): equal timings are one measurement, so
+    such a cell shows its one timing marked `ONE_TIMING`, never a bracket of zero width
+    (`_timing_cell`)."""
     columns = condition_order(r.task.condition or "" for r in records)
     first: dict[tuple[str, str, str], ResultRecord] = {}
     hosts: dict[tuple[str, str, str], set[str]] = defaultdict(set)
@@ -515,12 +632,13 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
                   if not clause.startswith(_PROVENANCE)})
     extra = [
         "Describing one map at a time (batch 1), median over repeats; matching time excluded. "
-        "A cell is the mean over its seeds timed on its lowest seed's host.",
+        "A cell is the mean of its seeds' distinct timings on its lowest seed's host.",
         f"Measured on: {'; '.join(machines)}. Runs: {'; '.join(how)} (each record's "
         "`timings.how_run` says which run timed it).",
     ]
     if len(machines) > 1:
         extra.append("Rows were timed on different machines: compare them with care.")
+    extra += _carried_note([r for r in records if on_first_host(r)])
     mixed: dict[tuple[str, str, tuple[str, ...]], list[str]] = defaultdict(list)
     for (name, version, task), seen in hosts.items():
         if len(seen) > 1:
@@ -533,7 +651,7 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
             + "; ".join(f"{name} v{version}, {', '.join(condition_order(cells))}: "
                         f"{' / '.join(seen)}" for (name, version, seen), cells in sorted(mixed.items()))
             + ".")
-    return _build(
+    table = _build(
         key,
         [r for r in records if on_first_host(r)],
         title="Feature inference time per frame (ms)",
@@ -543,7 +661,60 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
         extract=extract,
         notes=[*notes, *extra],
         fewer_seeds="its other seeds were not run, or were timed on another host (see the note on hosts).",
+        combine=_timing_cell,
     )
+    table.spread = "timings"
+    return table
+
+
+def _timing_cell(values: dict[int, float | None]) -> Cell | None:
+    """A time-table cell: the mean of its seeds' distinct timings and, with two or more, their
+    lowest and highest; `measurements` says how many there are. Equal values are one
+    measurement carried by several records (a median of timed repeats does not repeat to the
+    last bit by chance), so a cell timed once is that one timing, not an interval."""
+    if not values:
+        return None
+    seeds = frozenset(values)
+    if any(v is None for v in values.values()):
+        return Cell(mean=None, seeds=seeds)
+    distinct = sorted({float(v) for v in values.values() if v is not None})
+    mean = float(np.mean(np.asarray(distinct, dtype=np.float64)))
+    if len(distinct) == 1:
+        return Cell(mean=mean, seeds=seeds, measurements=1)
+    return Cell(mean=mean, low=distinct[0], high=distinct[-1], seeds=seeds,
+                measurements=len(distinct))
+
+
+#: What a record's `timings.how_run` says when it carries the timing of another seed of its cell.
+CARRIED = "measured at seed "
+
+
+def _carried_note(records: list[ResultRecord]) -> list[str]:
+    """A note on the cells whose seeds share one timing: how many, and why (from the records'
+    `timings.how_run`); [] when every seed of every cell was timed on its own."""
+    by_cell: dict[tuple[str, str, str], list[ResultRecord]] = defaultdict(list)
+    for r in records:
+        by_cell[(r.method.name, r.method.version, r.task.id)].append(r)
+    shared = carried = 0
+    for recs in by_cell.values():
+        timings = [r.timings.describe_ms_per_frame for r in recs]
+        if len(recs) < 2 or len(set(timings)) == len(timings):
+            continue
+        shared += 1
+        # every record of a repeated timing but one says it carries it
+        repeats = len(timings) - len(set(timings))
+        carried += sum(CARRIED in r.timings.how_run for r in recs) >= repeats
+    if not shared:
+        return []
+    why = ("the run timed the method at batch 1 once per (method, task), at the first seed it "
+           "computed, and the other seeds' records carry that timing (their `timings.how_run` "
+           "says \"the cell's timing …, measured at seed S\"); each seed's matches and scores are "
+           "its own")
+    if carried < shared:
+        why += (f"; in {shared - carried} of them records that do not say so hold the same "
+                "timing to the last digit, counted once as well")
+    return [f"{shared} of {len(by_cell)} cells were timed once for all their seeds: {why}. Such "
+            f"a cell shows its one timing, marked '{ONE_TIMING}', not a range."]
 
 
 def _machine(record: ResultRecord) -> str:
@@ -604,7 +775,7 @@ def sequence_table(key: TableKey, records: list[ResultRecord], metrics: tuple[Me
         columns=columns,
         formats=formats,
         extract=extract,
-        notes=notes,
+        notes=[*notes, *query_set_notes(records, lambda r: r.task.sequence, "sequence")],
     )
     return _label_modes(table)
 
