@@ -294,8 +294,14 @@ def test_scored_queries() -> None:
     assert scored_queries(10, 3) == slice(3, 7)
     assert scored_queries(3, 1) == slice(1, 2)
     for n, trim in ((10, 5), (2, 1), (3, 2)):
-        with pytest.raises(ConfigError, match=rf"^trim_queries={trim} leaves none of the {n} "):
+        with pytest.raises(ConfigError, match=rf"^trim_queries={trim} and 0 context queries leave none of the {n} "):
             scored_queries(n, trim)
+    # the task's context queries and the trim leave the same leading queries out: no sum
+    assert scored_queries(300, 5, context=10) == slice(10, 295)
+    assert scored_queries(200, 20, context=10) == slice(20, 180)
+    assert scored_queries(12, 0, context=10) == slice(10, 12)
+    with pytest.raises(ConfigError, match="10 context queries leave none of the 10"):
+        scored_queries(10, 0, context=10)
 
 
 def test_subset_truth_keeps_the_protocol() -> None:

@@ -232,7 +232,7 @@ def test_max_frames_and_trim_queries() -> None:
     assert len(part.matches["sequence"].index) == 30  # every kept query is matched ...
     assert part.metrics["sequence"].n_queries == part.metrics["single_frame"].n_queries == 18
     assert part.n_described == 60
-    with pytest.raises(ConfigError, match="trim_queries=20 leaves none of the 40"):
+    with pytest.raises(ConfigError, match="trim_queries=20 and 0 context queries leave none of the 40"):
         evaluate_method(Rows(), views, views, truth, config=EvaluationConfig(trim_queries=20))
     with pytest.raises(ConfigError, match="max_frames"):
         EvaluationConfig(max_frames=0)

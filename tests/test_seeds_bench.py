@@ -6,14 +6,17 @@ import os
 from pathlib import Path
 
 import pytest
+from conftest import write_bev
 
 from safl_bench import seeds_bench
 from safl_bench.cli import main
 
 
-def test_bench_seeds_prints_both_ratios_and_the_interval_share(bev_root: Path, safl_home: Path,
+def test_bench_seeds_prints_both_ratios_and_the_interval_share(tmp_path: Path, safl_home: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     home = os.environ.get("SAFL_HOME")
+    # 80 frames at every 4th: 20 queries, the last 10 scored (the first 10 are context)
+    bev_root = write_bev(tmp_path / "bev", n=80)
     result = seeds_bench.run(str(bev_root), ["sad"], repeats=1)
     assert os.environ.get("SAFL_HOME") == home  # each run's scratch home is undone
     figures = result["methods"]["sad"]
