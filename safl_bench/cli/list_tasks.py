@@ -7,7 +7,7 @@ import argparse
 from safl_bench.tasks import SUITES, registry, suite
 from safl_bench.tasks.spec import TaskSpec
 
-HELP = "list the registered benchmark tasks (id, protocol, sequence, condition, source)"
+HELP = "list the registered benchmark tasks (id, protocol, sequence, condition, source, scored queries)"
 
 SOURCE_NAMES = {"synth": "synthetic default", "kitti": "KITTI", "bev": "top-view images"}
 
@@ -28,7 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _row(spec: TaskSpec, details: bool) -> list[str]:
     condition = spec.condition.name if spec.protocol == "paper" else "-"
-    row = [spec.id, spec.protocol, spec.sequence, condition, SOURCE_NAMES[spec.source]]
+    scored = f"from query {spec.context_queries}" if spec.context_queries else "all queries"
+    row = [spec.id, spec.protocol, spec.sequence, condition, SOURCE_NAMES[spec.source], scored]
     if details:
         window = "-" if spec.window_s is None else f"{spec.window_s:g}"
         radii = (
@@ -56,14 +57,15 @@ def main(args: argparse.Namespace) -> int:
     ids = suite(args.suite, source=args.source)
     if args.suite == "all":
         ids += [i for i, s in registry.items() if i not in ids and args.source in (None, s.source)]
-    header = ["id", "protocol", "sequence", "condition", "source"]
+    header = ["id", "protocol", "sequence", "condition", "source", "scored"]
     if args.fingerprints:
         header += ["step", "radius m (tp/fp)", "window s", "fingerprint"]
     print(format_table([_row(registry[i], args.fingerprints) for i in ids], header))
     print(
         f"\n{len(ids)} tasks. Synthetic tasks run out of the box; KITTI tasks need --kitti-root "
         "or SAFL_KITTI_ROOT. Built-in paper protocol: database = clean maps of every 4th frame, queries = "
-        "the same frames re-rendered with noise T{a}R{b}, true positive within 10 m. Built-in revisit: "
+        "the same frames re-rendered with noise T{a}R{b}, true positive within 10 m; its first 10 queries, "
+        "and those of BEVPlace's protocol, are context (matched, not scored). Built-in revisit: "
         "matches only to frames > 30 s older, true positive within 3 m, false positive beyond 20 m."
     )
     return 0
