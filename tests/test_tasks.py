@@ -331,10 +331,13 @@ def test_list_tasks_cli_shows_paper_and_revisit_tasks(capsys: pytest.CaptureFixt
         ("KITTI09", "KITTI"),
     ):
         for c in PAPER_CONDITIONS:
-            version = 2 if seq.startswith("Synth") else 0
-            line = next(x for x in out.splitlines()
-                        if x.startswith(f"SAFL/{seq}-{c.name}-v{version} "))
-            assert line.split()[1:4] == ["paper", seq[-2:], c.name] and line.endswith(source)
+            for version, scored in ((5 if seq.startswith("Synth") else 1, "from query 10"),
+                                    (2 if seq.startswith("Synth") else 0, "all queries")):
+                line = next(x for x in out.splitlines()
+                            if x.startswith(f"SAFL/{seq}-{c.name}-v{version} "))
+                assert line.split()[1:4] == ["paper", seq[-2:], c.name]
+                assert line.endswith(f"{source}  {scored}") or f"{source} " in line
+                assert line.endswith(scored)
     assert "SAFL/KITTI08-Revisit-v0" in out and "SAFL/Synth00-Revisit-v4" in out
     assert (
         cli_main(["list", "tasks", "--suite", "paper", "--source", "kitti", "--fingerprints"]) == 0
