@@ -193,11 +193,10 @@ def _tiny_stable(**kw):
 
 def test_make_method_weights_choices(monkeypatch, tmp_path):
     monkeypatch.setattr(reg, "shipped_weights_path", lambda cls, source=None: None)
-    with pytest.warns(UserWarning, match="UNTRAINED"):
-        m = reg.make_method("stable_afl@1", width=4, encoder_width=4, code_size=16, hidden=16)
-    assert m.config()["weights"]["source"] == "untrained"
-    with pytest.raises(ConfigError, match="no shipped weights"):
-        reg.make_method("stable_afl@1", weights="shipped")
+    for weights in (None, "shipped"):  # no weights: an error, never the untrained networks
+        with pytest.raises(ConfigError, match="stable_afl@1 has no weights for the synthetic default"):
+            reg.make_method("stable_afl@1", weights=weights, width=4, encoder_width=4, code_size=16,
+                            hidden=16)
     m = reg.make_method("stable_afl@1", weights="untrained", width=4, encoder_width=4, code_size=16, hidden=16, seed=3)
     assert m.weights_info == {"source": "untrained", "seed": 3}
 
@@ -213,8 +212,9 @@ def test_make_method_weights_choices(monkeypatch, tmp_path):
     np.testing.assert_allclose(from_path.describe(maps), shipped.describe(maps), rtol=1e-4, atol=1e-9)
     with pytest.raises(ConfigError, match="conflicts with the weights"):
         reg.make_method("stable_afl@1", weights=str(path), code_size=32)
+    assert reg.make_method("stable_afl", weights=str(path)).version == "1"  # a bare name: the file's
     with pytest.raises(DataError, match=r"weights of stable_afl@1, not of stable_afl@2; .*--method stable_afl@1"):
-        reg.make_method("stable_afl", weights=str(path))  # a bare name is version 2: not these weights
+        reg.make_method("stable_afl@2", weights=str(path))  # version 2 never runs version 1's weights
 
 
 def test_method_load_dispatches_on_the_stored_name(tmp_path):

@@ -16,7 +16,7 @@ import pytest
 from record_factory import make_record, scored_record
 
 from safl_bench.cli import main
-from safl_bench.errors import DataError, RegistryError
+from safl_bench.errors import ConfigError, DataError, RegistryError
 from safl_bench.methods import method as reg
 from safl_bench.methods.method import Method
 
@@ -128,8 +128,10 @@ def test_load_picks_the_class_of_the_saved_version(versions: ModuleType, tmp_pat
     loaded = Method.load(path)
     assert type(loaded) is versions.V1 and loaded.seed == 4 and loaded.weights_info["saved_version"] == "1"
     assert isinstance(reg.make_method(f"{NAME}@1", weights=str(path)), versions.V1)
+    # a bare name runs the version of the file given; an explicit other version is an error
+    assert isinstance(reg.make_method(NAME, weights=str(path)), versions.V1)
     with pytest.raises(DataError, match=rf"weights of {NAME}@1, not of {NAME}@10; .*--method {NAME}@1"):
-        reg.make_method(NAME, weights=str(path))  # a bare name is version 10
+        reg.make_method(f"{NAME}@10", weights=str(path))
     with pytest.raises(DataError, match="not of"):
         versions.V2.load(path)
 
@@ -150,8 +152,10 @@ def test_shipped_weights_are_per_version(versions: ModuleType) -> None:
     assert reg.shipped_weights_path(versions.V1, "bev") == legacy
     shipped = reg.make_method(f"{NAME}@2", source="bev")
     assert shipped.weights_info["path"].endswith(f"weights/{NAME}-v2-bev.safetensors")
-    with pytest.warns(UserWarning, match="UNTRAINED"):
-        reg.make_method(f"{NAME}@9")
+    with pytest.raises(ConfigError, match=rf"{NAME}@9 has no weights for the synthetic default; "
+                       rf"versions with weights for it: {NAME}@1, {NAME}@2 .*"
+                       rf"`safl-bench train --method {NAME}@9`"):
+        reg.make_method(f"{NAME}@9")  # never the untrained networks unless asked
 
 
 def test_list_methods_shows_every_version_and_its_weights(versions: ModuleType, capsys) -> None:
@@ -162,7 +166,10 @@ def test_list_methods_shows_every_version_and_its_weights(versions: ModuleType, 
     rows = {(r["name"], r["version"]): r for r in json.loads(capsys.readouterr().out)}
     mine = {v: rows[(NAME, v)] for v in ("1", "2", "9", "10")}
     assert [v for v, r in mine.items() if r["bare_name"]] == ["10"]
-    assert mine["1"]["select"] == f"{NAME}@1" and mine["10"]["select"] == f"{NAME} or {NAME}@10"
+    # a bare name runs 1 on the synthetic default and KITTI scans (its weights), 2 on top views
+    assert mine["1"]["select"] == f"{NAME}@1 ({NAME} on synth, kitti)"
+    assert mine["2"]["select"] == f"{NAME}@2 ({NAME} on bev)" and mine["10"]["select"] == f"{NAME}@10"
+    assert mine["1"]["bare_name_runs_on"] == ["synth", "kitti"] and mine["10"]["bare_name_runs_on"] == []
     assert mine["1"]["weights"] == {"synth": f"{NAME}.safetensors"}
     assert mine["2"]["weights"] == {"bev": f"{NAME}-v2-bev.safetensors"}
     assert mine["9"]["weights"] == {}
@@ -171,7 +178,7 @@ def test_list_methods_shows_every_version_and_its_weights(versions: ModuleType, 
     out = capsys.readouterr().out
     line = next(ln for ln in out.splitlines() if ln.startswith(NAME) and f"{NAME}@2 " in ln)
     assert "bev" in line and "synth" not in line
-    assert "A bare name selects the newest version" in out
+    assert "A bare name runs, on each data source, the newest version with weights for it" in out
 
 
 def test_the_run_table_keeps_two_versions_of_a_name_apart() -> None:
@@ -203,21 +210,23 @@ def test_the_leaderboard_keeps_two_versions_of_a_name_apart() -> None:
                           ("stable_afl", "2", "sequence"), ("stable_afl", "2", "single-frame")]
     assert [table.cells[i][0].mean for i in (0, 2)] == [pytest.approx(0.9), pytest.approx(0.2)]
     assert "| stable_afl | 2 | sequence |" in table.markdown()
-    # each record's explain command selects its own version (a bare name is the newest)
+    # each record's explain command selects its own version (a bare name runs, on the synthetic
+    # default, the newest version with weights for it: 1, so a record of 2 names its version)
     assert "--method stable_afl@1 " in explain_command(records[0], "r")
-    assert "--method stable_afl " in explain_command(records[-1], "r")
+    assert "--method stable_afl@2 " in explain_command(records[-1], "r")
 
 
-def test_compare_reads_one_version_a_bare_name_the_newest(tmp_path: Path, capsys) -> None:
+def test_compare_reads_one_version_a_bare_name_the_one_run_runs(tmp_path: Path, capsys) -> None:
     from safl_bench.records import write_record
 
     for v, skill in (("1", 0.9), ("2", 0.3)):
         for seed in (0, 1):
             write_record(tmp_path, scored_record("stable_afl", seed=seed, skill=skill, method_version=v))
-    argv = ["compare", "--method", "stable_afl@1", "--method", "stable_afl", "--results", str(tmp_path)]
+    # on the synthetic default a bare name runs version 1 (the newest with weights there)
+    argv = ["compare", "--method", "stable_afl@2", "--method", "stable_afl", "--results", str(tmp_path)]
     assert main(argv) == 0
     out = capsys.readouterr().out
-    assert "A = stable_afl@1, B = stable_afl" in out and "verdict: A better on" in out
+    assert "A = stable_afl@2, B = stable_afl" in out and "verdict: B better on" in out
     assert main(["compare", "--method", "stable_afl@3", "--method", "stable_afl", "--results",
                  str(tmp_path)]) == 2
     err = capsys.readouterr().err

@@ -132,17 +132,18 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     """Recompute one cell from its record (see the module docstring). `options` is a
     `runner.RunOptions` (results directory, seed, data-source options, progress); a cell
     without a record is a DataError whose message is the run command that makes it."""
-    from safl_bench.methods.method import method_class, method_selector
+    from safl_bench.methods.method import method_class, method_selector, resolve_method
     from safl_bench.run.runner import _task
     from safl_bench.tasks.registry import runnable_spec
 
     registered = runnable_spec(task_id)  # an old synthetic task cannot be recomputed
     seed = registered.seed if options.seed is None else int(options.seed)
-    cls = method_class(method)
+    cls = method_class(resolve_method(method, registered.source))  # what `run` ran there
     path = record_path(options.results_dir, cls.name, cls.version, registered.id, seed)
     if not path.is_file():
         given = None if options.results_dir == default_results_dir() else options.results_dir
-        command = run_command(method_selector(cls.name, cls.version), registered.id, seed=options.seed, results=given,
+        command = run_command(method_selector(cls.name, cls.version, registered.source),
+                              registered.id, seed=options.seed, results=given,
                               source_options=_source_flags(options))
         raise DataError(f"no record of {cls.name}@{cls.version} on {registered.id} seed {seed} in "
                         f"{options.results_dir}; make it with: {command}")

@@ -3,7 +3,7 @@
 For each method: milliseconds per frame at batch 1 (the robot's case), throughput in batches,
 and for methods with their own distance the time of a KITTI-00-sized difference matrix
 (4541 x 4541 descriptors, drawn from the real ones with replacement). Views are those of a
-clean task (by default `SAFL/Synth00-T0R0-v4`, generated and cached on first use), so every
+clean task (by default `SAFL/Synth00-T0R0-v5`, generated and cached on first use), so every
 method is timed on the input it declares (top-view maps or local-map points), resampled to its
 `input_size` as the runner does. A method whose cost depends on the view size and that is
 published for one size (class attribute `bench_view_size`, e.g. BEVPlace's 151 x 151 images) is
@@ -35,11 +35,12 @@ from safl_bench.methods.method import (
     make_method,
     method_class,
     method_input,
+    resolve_method,
     shipped_weights_path,
 )
 from safl_bench.run import timing
 
-DEFAULT_TASK = "SAFL/Synth00-T0R0-v4"
+DEFAULT_TASK = "SAFL/Synth00-T0R0-v5"
 MATRIX_N = 4541
 BATCHED_BUDGET_S = 10.0
 
@@ -160,9 +161,9 @@ def run(
     task = make(task_id, progress=progress)
     results = []
     for name in names:
-        cls = method_class(name)
+        cls = method_class(resolve_method(name))  # a bare name: the version `run` runs
         untrained = cls.trainable and shipped_weights_path(cls) is None
-        method = make_method(name, weights="untrained" if untrained else None)
+        method = make_method(f"{cls.name}@{cls.version}", weights="untrained" if untrained else None)
         views = task.database(method.input_kind)
         results.append(bench_method(method, views, frames=frames, repeats=repeats, matrix_n=matrix_n))
     return results

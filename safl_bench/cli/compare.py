@@ -9,6 +9,7 @@ one-line verdict: which measures A wins or loses beyond the noise, and which are
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -25,8 +26,9 @@ DEFAULT_MEASURES = ("recall_at_100_precision", "f1_max", "recall_at_1", "auc")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", action="append", required=True, metavar="NAME[@VERSION]",
-                   help="give exactly two: A, then B (a bare name is its newest version; "
-                        "name@VERSION picks one, e.g. two versions of one method)")
+                   help="give exactly two: A, then B (a bare name is the version `run` runs on "
+                        "the records' data; name@VERSION picks one, e.g. two versions of one "
+                        "method)")
     p.add_argument("--task", action="append", metavar="ID|SUITE",
                    help="task id or suite (as for `run`); repeatable; default: every task both "
                         "methods have records of")
@@ -40,10 +42,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _pick(records: list[ResultRecord], text: str) -> dict[str, dict[int, ResultRecord]]:
-    """{task id: {seed: record}} of one method at one version: `name@V`, or for a bare name its
-    newest registered version (what a bare name means in every command; the newest version
-    with records when the name is not registered here). Records of two versions never mix."""
-    from safl_bench.methods.method import method_versions, version_key
+    """{task id: {seed: record}} of one method at one version: `name@V`, or for a bare name the
+    version `safl-bench run --method name` runs on each record's data source (`resolve_method`:
+    for a learned method the newest version with weights for it; the newest version with
+    records when the name is not registered here). Records of two versions never mix in a cell."""
+    from safl_bench.methods.method import method_versions, resolve_method, version_key
 
     name, _, version = text.partition("@")
     mine = [r for r in records if r.method.name == name]
@@ -52,14 +55,22 @@ def _pick(records: list[ResultRecord], text: str) -> dict[str, dict[int, ResultR
                         f"{', '.join(sorted({r.method.name for r in records})) or 'none'})")
     held = sorted({r.method.version for r in mine}, key=version_key)
     registered = method_versions(name)
-    version = version or (registered[-1] if registered else held[-1])
+
+    @functools.cache
+    def wanted(source: str) -> str:
+        if version:
+            return version
+        return resolve_method(name, source).partition("@")[2] if registered else held[-1]
+
     out: dict[str, dict[int, ResultRecord]] = defaultdict(dict)
     for r in mine:
-        if r.method.version == version:
+        if r.method.version == wanted(r.task.source_kind):
             out[r.task.id][r.seed] = r
     if not out:
-        bare = "" if "@" in text else f" (a bare {name!r} is its newest version, {version})"
-        raise DataError(f"no records of {name}@{version}{bare}; records of "
+        sources = sorted({r.task.source_kind for r in mine})
+        picked = ", ".join(f"{name}@{wanted(s)}" for s in sources)
+        bare = "" if "@" in text else f" (what a bare {name!r} runs on their data)"
+        raise DataError(f"no records of {picked}{bare}; records of "
                         f"{', '.join(f'{name}@{v}' for v in held)}"
                         + (f"; registered: {', '.join(f'{name}@{v}' for v in registered)}"
                            if registered else ""))

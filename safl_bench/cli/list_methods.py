@@ -1,5 +1,6 @@
 """`safl-bench list methods`: every registered version of every descriptor method, which one a
-bare name means, the weights each version ships (per data source) and where each comes from."""
+bare name runs on each data source, the weights each version ships (per data source) and where
+each comes from."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import json
 from pathlib import Path
 
 from safl_bench.cli.list_tasks import format_table
-from safl_bench.methods.method import MethodInfo, list_methods, shipped_weights_path
+from safl_bench.methods.method import MethodInfo, list_methods, resolve_method, shipped_weights_path
 
 HELP = ("list the registered descriptor methods, every version (name, version, which one a bare "
         "name means, input, shipped weights per source, origin)")
@@ -43,18 +44,33 @@ def shipped_by_source(info: MethodInfo) -> dict[str, Path] | None:
 
 def main(args: argparse.Namespace) -> int:
     """Print the table (plug-ins that failed to load are listed with their error)."""
+    from safl_bench.tasks.spec import SOURCES
+
     infos = list_methods(include_broken=True, all_versions=True)
     newest = {i.name: i.version for i in list_methods()}
+    # what a bare name runs on each source (`resolve_method`: a learned method's newest version
+    # with weights for it)
+    runs = {(i.name, s): resolve_method(i.name, s).partition("@")[2]
+            for i in infos if i.error is None and newest.get(i.name) == i.version for s in SOURCES}
     rows = []
     for info in infos:
         shipped = shipped_by_source(info)
         several = sum(i.name == info.name for i in infos) > 1
+        bare_on = [s for s in SOURCES if runs.get((info.name, s)) == info.version]
+        if not several:
+            select = info.name
+        elif not bare_on:
+            select = f"{info.name}@{info.version}"
+        elif len(bare_on) == len(SOURCES):
+            select = f"{info.name} or {info.name}@{info.version}"
+        else:
+            select = f"{info.name}@{info.version} ({info.name} on {', '.join(bare_on)})"
         rows.append({
             "name": info.name,
             "version": info.version,
-            "select": f"{info.name}" + (f" or {info.name}@{info.version}" if several else "")
-            if newest.get(info.name) == info.version else f"{info.name}@{info.version}",
+            "select": select,
             "bare_name": newest.get(info.name) == info.version,
+            "bare_name_runs_on": bare_on,
             "input": info.input_kind,
             "from": info.origin if info.error is None else f"{info.origin}: FAILED TO LOAD: {info.error}",
             "description": info.summary,
@@ -75,7 +91,8 @@ def main(args: argparse.Namespace) -> int:
     keys = ["name", "version", "select", "input", "weights", "from"] + (["description"] if args.verbose else [])
     table = [[weights(r, args.verbose) if k == "weights" else str(r[k]) for k in keys] for r in rows]
     print(format_table(table, keys))
-    print("A bare name selects the newest version; name@VERSION selects that one. weights: the "
+    print("A bare name runs, on each data source, the newest version with weights for it (a "
+          "method that learns nothing: its newest); name@VERSION selects that one. weights: the "
           "data each version's shipped weights were trained for (synth: the synthetic default's, "
           "used where no source has its own; bev: real KITTI top views; published: its authors').")
     return 0

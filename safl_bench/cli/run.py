@@ -46,8 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="recompute cells whose record exists")
     parser.add_argument(
         "--weights", metavar="PATH|shipped|untrained",
-        help="learned methods: a weights file from `safl-bench train`, the shipped ones (default) "
-        "or the untrained networks",
+        help="learned methods: a weights file from `safl-bench train`, the shipped ones for each "
+        "task's data (default; a bare name runs the newest version that ships them), or "
+        "'untrained': score the random networks (records and tables mark them '(untrained)')",
     )
     parser.add_argument(
         "--param", action="append", default=[], metavar="KEY=VALUE",
@@ -99,6 +100,29 @@ def distinct_seeds(seeds: list[int]) -> list[int]:
     return seeds
 
 
+def weights_line(method: Any, source: str) -> str | None:
+    """One line saying which version of a configured method runs on `source` and with which
+    weights (its record says the same: ``method.version``, ``method.params.weights``); None for
+    a method without weights (it learns nothing: the run's last line names its version)."""
+    from safl_bench.methods.method import SOURCE_WORDS
+
+    info = method.weights_info
+    if not info:
+        return None
+    where = SOURCE_WORDS.get(source, (source, ""))[0]
+    kind = info.get("source")
+    if kind == "untrained":
+        what = (f"its UNTRAINED (random) networks, seed {info.get('seed')}, as --weights untrained "
+                "asks; records and tables mark them (untrained)")
+    elif kind == "shipped":
+        what = f"its shipped weights {info.get('path')}"
+    elif kind == "file":
+        what = f"the weights file {info.get('path')}"
+    else:
+        what = f"the weights {info.get('path')} ({kind})"
+    return f"{method.name}@{method.version} on {where}: {what}"
+
+
 def main(args: argparse.Namespace) -> int:
     from safl_bench.errors import ConfigError
     from safl_bench.methods.method import make_method, method_class
@@ -129,12 +153,21 @@ def main(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     parallel = parallel_from(args)
+    # a bare name runs, per source, the newest version with weights for it (`resolve_method`);
+    # a version without them fails here, before any work
+    built = {source: [make_method(name, weights=args.weights, source=source, **params)
+                      for name in names] for source in by_source}
     outcomes = []
+    ran: list[str] = []
     for source, ids in by_source.items():
-        methods = [make_method(name, weights=args.weights, source=source, **params) for name in names]
-        outcomes += run_grid(methods, ids, options, seeds=seeds, n_seeds=args.seeds,
+        for method in built[source]:  # which version and weights, once, before the progress bars
+            line = weights_line(method, source)
+            if line is not None:
+                print(line, flush=True)
+        ran += [f"{m.name}@{m.version}" for m in built[source]]
+        outcomes += run_grid(built[source], ids, options, seeds=seeds, n_seeds=args.seeds,
                              parallel=parallel)
-    labels = ', '.join(f"{n.partition('@')[0]}@{method_class(n).version}" for n in names)
+    labels = ', '.join(dict.fromkeys(ran))
     print(f"{labels} — records in {options.results_dir}")
     print(summary_table(outcomes))
     failed = [o for o in outcomes if o.status == "failed"]

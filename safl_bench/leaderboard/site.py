@@ -345,7 +345,8 @@ def explain_command(record: ResultRecord, records_folder: str) -> str:
     """The `safl-bench explain` command that draws `record`'s cell."""
     from safl_bench.methods.method import method_selector
 
-    method = method_selector(record.method.name, record.method.version)  # the record's version
+    method = method_selector(record.method.name, record.method.version,  # the record's version
+                             record.task.source_kind)
     parts = ["safl-bench explain", f"--method {method}", f"--task {record.task.id}",
              f"--seed {record.seed}", f"--results {records_folder}"]
     if record.task.source_kind in ROOT_OPTION:

@@ -218,12 +218,14 @@ def _version_key(version: str) -> tuple[int, ...] | tuple[str]:
 
 def _row_sort_key(row: RowKey) -> tuple[object, ...]:
     mode_rank = MODES.index(row[2]) if row[2] in MODES else -1
-    version = row[1].removesuffix(SEEN_MARK)
+    version = row[1].removesuffix(UNTRAINED_MARK).removesuffix(SEEN_MARK)
     return (row[0], _version_key(version), version, row[1] != version, mode_rank, row[2])
 
 
 #: Appended to the version of a row whose records' weights were trained on the task's sequence.
 SEEN_MARK = " (seen in training)"
+#: Appended to the version of a row whose records ran the untrained (random) networks.
+UNTRAINED_MARK = " (untrained)"
 
 
 class Value(NamedTuple):
@@ -261,17 +263,22 @@ def _build(
     on a cell over fewer seeds than the table's: what to make of it and how to fill it.
     `combine`: makes a cell of its seeds' values in place of their mean and bracket (the time
     table's, `_timing_cell`)."""
-    from safl_bench.methods.training_data import record_seen
+    from safl_bench.methods.training_data import record_seen, record_untrained
 
     seeds = seed_set(records)
     values: dict[tuple[RowKey, str], dict[int, float | None]] = defaultdict(dict)
     sources: dict[tuple[RowKey, str], dict[int, ResultRecord]] = defaultdict(dict)
     probe: dict[tuple[RowKey, str], tuple[str, str | None]] = {}
     seen_rows: set[RowKey] = set()
+    any_untrained = False
     for record in records:
         seen = record_seen(record) is not None
+        untrained = record_untrained(record)
+        any_untrained = any_untrained or untrained
         for v in extract(record):
             row = (v.row[0], v.row[1] + SEEN_MARK, v.row[2]) if seen else v.row
+            if untrained:
+                row = (row[0], row[1] + UNTRAINED_MARK, row[2])
             if seen:
                 seen_rows.add(row)
             values[(row, v.column)][record.seed] = v.value
@@ -336,6 +343,10 @@ def _build(
                          "were trained on this task's sequence (`safl_bench.training_data`); "
                          "their scores measure memory, not generalisation, and are never ranked "
                          "beside the other rows.")
+    if any_untrained:
+        all_notes.append(f"Rows whose version says '{UNTRAINED_MARK.strip()}': scored with the "
+                         "method's untrained (random) networks (`--weights untrained`), not "
+                         "trained weights.")
     all_notes.extend(_matcher_notes(records))
     return Table(
         title=title,

@@ -42,6 +42,10 @@ what is registered and where each came from (module and distribution).
 Several versions of one name may be registered (each its own class): a bare name is the newest
 (`version_key`: "10" after "9"), ``name@version`` selects one (`method_class`), and shipped
 weights belong to one version (`shipped_weights_path`); docs/guides/add-method.md#versions.
+What a bare name RUNS on a data source is `resolve_method`: for a method that learns its
+weights, the newest version that ships weights for that source, so a fresh installation scores
+trained networks; `make_method` never falls back to untrained ones unless asked
+(``weights="untrained"``).
 """
 
 from __future__ import annotations
@@ -492,12 +496,73 @@ def method_class(name: str) -> type[Method]:
     raise RegistryError(f"unknown method {name!r}{hint} (known: {', '.join(known) or 'none'})")
 
 
-def method_selector(name: str, version: str) -> str:
+def method_selector(name: str, version: str, source: str | None = None) -> str:
     """What a command takes to select `name` at `version`: the bare name when that is the
-    newest registered version (what a bare name means), else ``name@version``; commands printed
-    for a record (explain, run) use it so that they pick the record's version."""
+    newest registered version and, given the data `source` ("synth", "kitti", "bev"), the one a
+    bare name runs there (`resolve_method`), else ``name@version``; commands printed for a
+    record (explain, run) use it so that they pick the record's version."""
     versions = method_versions(name)
-    return name if versions and versions[-1] == str(version) else f"{name}@{version}"
+    if not versions or versions[-1] != str(version):
+        return f"{name}@{version}"
+    if source is not None and resolve_method(name, source) != f"{name}@{version}":
+        return f"{name}@{version}"
+    return name
+
+
+#: How messages name each data source kind, and the option `safl-bench train` takes for it.
+SOURCE_WORDS: dict[str, tuple[str, str]] = {
+    "synth": ("the synthetic default", ""),
+    "kitti": ("KITTI scans", " --kitti-root DIR"),
+    "bev": ("top-view images", " --bev-root DIR"),
+}
+
+
+def trained_versions(name: str, source: str | None = None) -> list[str]:
+    """The registered versions of `name` (bare) that learn their weights and ship weights for
+    `source` (`shipped_weights_path`; None: the synthetic default's), oldest first."""
+    base = name.partition("@")[0]
+    out = []
+    for version in method_versions(base):
+        cls = method_class(f"{base}@{version}")
+        if cls.trainable and shipped_weights_path(cls, source) is not None:
+            out.append(version)
+    return out
+
+
+def resolve_method(name: str, source: str | None = None, weights: str | Path | None = None) -> str:
+    """``name@version``: the version `name` runs on data `source` ("synth", the default when
+    None; "kitti"; "bev"). ``name@version`` is itself; a bare name of a method that learns its
+    weights is the version of the weights file `weights` when it names one, else the newest
+    version that ships weights for `source` (`trained_versions`), else the newest; a bare name
+    of any other method is its newest version. It depends only on the registry, the shipped
+    files and the file given, and records hold the version it picked."""
+    cls = method_class(name)  # an unknown name or version fails here
+    if "@" in name or not cls.trainable:
+        return f"{cls.name}@{cls.version}"
+    if weights not in (None, "shipped", "untrained"):
+        saved = _saved_version(Path(str(weights)))
+        if saved is not None and saved in method_versions(name):
+            return f"{cls.name}@{saved}"
+    trained = trained_versions(name, source)
+    return f"{cls.name}@{trained[-1] if trained else cls.version}"
+
+
+def missing_weights_message(cls: type[Method], source: str | None = None) -> str:
+    """The one line for a version of a learned method that ships no weights for `source`: the
+    versions that do, and the commands that make its own or score it untrained."""
+    kind = source or "synth"
+    where, option = SOURCE_WORDS.get(kind, (f"source {kind!r}", ""))
+    selector = f"{cls.name}@{cls.version}"
+    have = trained_versions(cls.name, source)
+    if have:
+        bare = resolve_method(cls.name, source)
+        others = (f"versions with weights for it: {', '.join(f'{cls.name}@{v}' for v in have)} "
+                  f"(a bare {cls.name!r} runs {bare} there)")
+    else:
+        others = f"no version of {cls.name!r} ships weights for it"
+    return (f"{selector} has no weights for {where}; {others}; make {selector}'s with "
+            f"`safl-bench train --method {selector}{option}` and pass the {cls.name}.safetensors "
+            "it writes with --weights, or score its untrained networks with --weights untrained")
 
 
 def _ships_weights(cls: type[Method]) -> bool:
@@ -549,22 +614,25 @@ def _saved_version(path: Path) -> str | None:
 
 def make_method(name: str, *, weights: str | Path | None = None, source: str | None = None,
                 **params: Any) -> Method:
-    """A configured instance of the method registered as `name` (its newest version) or
-    ``name@version`` (that version; an unregistered one is a RegistryError listing them).
+    """A configured instance of the method registered as `name` or ``name@version`` (that
+    version; an unregistered one is a RegistryError listing them). A bare name is the version
+    it runs on `source` (`resolve_method`: for a learned method, the newest version with weights
+    for that source, or the version of the weights file given).
 
-    For trainable methods, `weights` picks the learned state:
-      * None (default): the shipped weights when the package has them (those trained on
-        `source`'s kind of data where they exist, see `shipped_weights_path`), otherwise the
-        untrained (random, seeded) networks with a warning; `config()["weights"]` records which;
-      * "shipped": the shipped weights, ConfigError when there are none;
-      * "untrained": the randomly initialised networks (the honesty baseline);
+    For trainable methods, `weights` picks the learned state (`config()["weights"]` records it):
+      * None (default) or "shipped": the shipped weights (those trained on `source`'s kind of
+        data where they exist, see `shipped_weights_path`); a version that ships none for
+        `source` is a ConfigError naming the versions that do and the `safl-bench train`
+        command that makes its own (`missing_weights_message`), never untrained networks;
+      * "untrained": the randomly initialised networks (the honesty baseline), only when asked;
+        recorded as ``{"source": "untrained", "seed": ...}``;
       * a path: a file written by `Method.save` / `safl-bench train`.
 
     Methods with published weights that are not trained here (`ships_weights`, e.g. BEVPlace)
     load the shipped ones in their constructor (None or "shipped"); a path goes to `cls.load`;
     they have no "untrained" variant.
     """
-    cls = method_class(name)
+    cls = method_class(resolve_method(name, source, weights))
     if not cls.trainable and _ships_weights(cls):
         if weights == "untrained":
             raise ConfigError(f"method {name!r} runs its authors' published weights; it has no untrained variant")
@@ -587,16 +655,7 @@ def make_method(name: str, *, weights: str | Path | None = None, source: str | N
                 "picked_for": source or "synth",
             }
             return method
-        if weights == "shipped":
-            raise ConfigError(
-                f"method {name!r} has no shipped weights in this installation; train them with "
-                f"`safl-bench train --method {name}` and pass the file with --weights"
-            )
-        warnings.warn(
-            f"method {name!r}: no shipped weights found; using the UNTRAINED (random) networks",
-            stacklevel=2,
-        )
-        weights = "untrained"
+        raise ConfigError(missing_weights_message(cls, source))
     if weights == "untrained":
         method = _construct(cls, params)
         method.weights_info = {"source": "untrained", "seed": params.get("seed", getattr(method, "seed", None))}

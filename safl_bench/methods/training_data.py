@@ -13,6 +13,10 @@ the same data set: real KITTI whether read as scans (``kitti``) or as top-view i
 (its label names the generator's seed). Its scores measure memory, not generalisation:
 `seen_note` says so in the record (``seen_in_training``), the run table marks it and the
 leaderboard never ranks it beside clean cells.
+
+A record of UNTRAINED networks (random weights, scored only when asked: ``--weights
+untrained``) trained on nothing: its ``method.params.weights.source`` is "untrained"
+(`record_untrained`), and the run table and every leaderboard table mark it `UNTRAINED_MARK`.
 """
 
 from __future__ import annotations
@@ -112,3 +116,14 @@ def record_seen(record: _Record) -> str | None:
         return record.seen_in_training
     return seen_note(record.method.params, record.task.source_kind, record.task.source_label,
                      record.task.sequence)
+
+
+#: What tables append to the method version (or task) of a cell scored with untrained networks.
+UNTRAINED_MARK = " (untrained)"
+
+
+def record_untrained(record: _Record) -> bool:
+    """Whether the record's method ran its untrained (random) networks: only when asked for
+    (``--weights untrained``; `make_method`), and its ``method.params.weights.source`` says so."""
+    weights = record.method.params.get("weights") if isinstance(record.method.params, Mapping) else None
+    return isinstance(weights, Mapping) and weights.get("source") == "untrained"

@@ -671,7 +671,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     two, labelled `name@V`); a failed seed gets its own row."""
     from safl_bench.evaluation.uncertainty import bootstrap
     from safl_bench.matching.presets import label
-    from safl_bench.methods.training_data import record_seen
+    from safl_bench.methods.training_data import UNTRAINED_MARK, record_seen, record_untrained
     from safl_bench.results.records import seed_outcomes
 
     labels = method_labels(outcomes)
@@ -680,7 +680,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     header = (*lead, "task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC",
               "R@100%P 1-frame", "R@1 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
-    no_interval = any_seen = False
+    no_interval = any_seen = any_untrained = False
     for method, task_id, cell in _cells(outcomes):
         records = [o.record for o in cell if o.record is not None]
         first = records[0]
@@ -704,8 +704,11 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         seq, single = shown["sequence"], shown["single_frame"]
         seen = record_seen(first) is not None
         any_seen = any_seen or seen
+        untrained = record_untrained(first)
+        any_untrained = any_untrained or untrained
         rows.append((
-            *((method,) if by_method else ()), task_id + (" (seen in training)" if seen else ""),
+            *((method,) if by_method else ()),
+            task_id + (" (seen in training)" if seen else "") + (UNTRAINED_MARK if untrained else ""),
             format_seed_list([o.seed for o in cell]),
             label(first.matcher), seq["recall_at_100_precision"], seq["f1_max"],
             seq["recall_at_1"], seq["auc"], single["recall_at_100_precision"],
@@ -728,6 +731,9 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     if any_seen:
         extra.append("note: (seen in training): the method's weights were trained on that task's "
                      "sequence; its scores measure memory, not generalisation")
+    if any_untrained:
+        extra.append(f"note:{UNTRAINED_MARK}: scored with the method's untrained (random) networks "
+                     "(--weights untrained), not trained weights")
     note = zeros_note(outcomes)
     return "\n".join([*lines, legend, *extra] + ([note] if note else []))
 
@@ -765,7 +771,8 @@ def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
     first = cells[0]
     option = ROOT_OPTION.get(first.record.task.source_kind) if first.record is not None else None
     root = f" {option}" if option else ""
-    selector = method_selector(first.method, first.version) if first.version else first.method
+    kind = first.record.task.source_kind if first.record is not None else None
+    selector = method_selector(first.method, first.version, kind) if first.version else first.method
     return (f"note: recall at 100 % precision is 0.0 in {len(cells)} record(s) whose matches are mostly "
             "correct (R@1 >= 50 %): the most confident wrong match comes before any correct one; "
             f"see which with `safl-bench explain --method {selector} --task {first.task_id}{root}`")
