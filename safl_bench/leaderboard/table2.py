@@ -363,8 +363,9 @@ README_END = "<!-- table2:end -->"
 
 def grid(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> str:
     """Table II's own layout: one line per method with the paper's values, then one per version
-    and weights of ours (mean [95 % interval], one column per condition); a value of ours in
-    bold is one whose interval does not hold the paper's value."""
+    and weights of ours (mean [95 % interval], one column per condition); a value of ours
+    marked ✗ is one whose interval does not hold the paper's value (a mark, not bold: the README
+    that shows this grid uses bold for the best of a column beyond the noise)."""
     head = ["Method", "Version", "Weights", *CONDITIONS]
     lines = ["| " + " | ".join(head) + " |", "|---|---|---|" + "---:|" * len(CONDITIONS)]
     groups: dict[tuple[str, str, str], dict[str, Row]] = {}
@@ -381,7 +382,7 @@ def grid(rows: Sequence[Row], measure: str = MEASURES[0][0]) -> str:
                 cell = by_condition.get(condition)
                 iv = cell.ours.get(measure) if cell is not None else None
                 text = iv.format(100.0) if iv is not None else "—"
-                values.append(f"**{text}**" if cell is not None and cell.inside(measure) is False else text)
+                values.append(f"✗ {text}" if cell is not None and cell.inside(measure) is False else text)
             lines.append(f"| {PAPER_NAMES[name]} | {version} | {weights} | " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
 
@@ -398,7 +399,7 @@ def readme_block(rows: Sequence[Row], table: str) -> str:
         "Table II (the paper's recall at 100 % precision) beside ours on real KITTI 00 top views "
         "under the authors' paper-era presets (`authors`; SAD `authors-sad`), sequence matching: "
         "mean over seeds [95 % interval over seeds and queries], recall over every query with a "
-        "true place. **Bold**: the paper's value lies outside our interval.",
+        "true place. ✗: the paper's value lies outside our interval.",
         "",
         grid(rows).rstrip("\n"),
         "",

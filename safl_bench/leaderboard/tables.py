@@ -739,7 +739,7 @@ Metric = tuple[str, str, ValueFormat]
 
 REVISIT_METRICS: tuple[Metric, ...] = (
     ("f1_max", "F1max", F1_FORMAT),
-    ("recall_at_100_precision", "R@100P (%)", RECALL_FORMAT),
+    ("recall_at_100_precision", "R@100%P (%)", RECALL_FORMAT),
     ("auc", "AUC", AUC_FORMAT),
     ("recall_at_1", "R@1 (%)", RECALL_FORMAT),
 )
