@@ -254,6 +254,14 @@ def test_one_class_and_no_positive() -> None:
     assert all(c.format() == "n/a" and math.isnan(c.low) for c in cells.values())
 
 
+def test_recall_at_n_counts_a_true_place_ranked_exactly_n() -> None:
+    o = metrics.outcomes([4.0, 3.0, 2.0, 1.0, 0.5], [1, 0, 0, 0, 0], [True] * 4 + [False],
+                         true_rank=[5, 6, 10, 11, 0])
+    got = point(o)
+    assert (got["recall_at_5"], got["recall_at_10"]) == (1 / 4, 3 / 4)
+    assert_agrees_with_metrics(o, got)
+
+
 def test_without_ranks_there_is_no_recall_at_5_or_10() -> None:
     o = tied_case()
     bare = Outcomes(o.confidence, o.label, o.has_true_place, o.has_candidate)
