@@ -84,6 +84,10 @@ def test_run_runs_every_declared_seed_once_and_reuses_them(seed_tasks, kitti_roo
     noisy_row = next(line for line in table if line.startswith(NOISY))
     assert noisy_row.split()[1] == "0-2" and "[" in noisy_row and "computed 3" in noisy_row
     assert any("95 % interval over seeds and queries" in line for line in table)
+    # the seeds carry the cell's one timing: shown as one, not as a bracket of zero width
+    ms = {o.record.timings.describe_ms_per_frame for o in first  # type: ignore[union-attr]
+          if o.task_id == NOISY}
+    assert len(ms) == 1 and f"{ms.pop():.2f} (1 timing)" in noisy_row
 
 
 def test_seeds_share_the_cells_timing_and_database_and_records_stay_the_same(

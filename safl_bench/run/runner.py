@@ -696,8 +696,11 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
                                "f1_max": iv["f1_max"].format(1, 3),
                                "recall_at_1": iv["recall_at_1"].format(100),
                                "auc": iv["auc"].format(1, 3)}
-        ms = sorted(r.timings.describe_ms_per_frame for r in records)
-        timing = f"{float(np.median(ms)):.2f}" + (f" [{ms[0]:.2f}, {ms[-1]:.2f}]" if len(ms) > 1 else "")
+        # a run times a cell once and its other seeds carry that timing: one timing is shown as
+        # one, a range only over distinct timings
+        ms = sorted(set(r.timings.describe_ms_per_frame for r in records))
+        timing = f"{float(np.median(ms)):.2f}" + (f" [{ms[0]:.2f}, {ms[-1]:.2f}]" if len(ms) > 1
+                                                  else " (1 timing)" if len(records) > 1 else "")
         statuses = [o.status for o in cell]
         status = ", ".join(f"{s} {statuses.count(s)}" if len(statuses) > 1 else s
                            for s in dict.fromkeys(statuses))
@@ -725,7 +728,8 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     legend = (f"mean over the seeds [95 % interval over seeds and queries, block bootstrap]; "
               f"R@100%P, F1max, R@1: recall over the queries with a true place (metrics version "
               f"{METRICS_VERSION}; recall over correct matches is in the records); ms/frame: "
-              "median over the seeds' records [their range]")
+              "describing one map at batch 1, median of the cell's distinct timings [their range]; "
+              "'(1 timing)': the cell was timed once, at its first seed")
     extra = ["note: some records hold no per-query outcomes (metrics version 1): their cells show "
              "the mean only; `safl-bench run --force` recomputes them"] if no_interval else []
     if any_seen:
