@@ -140,7 +140,7 @@ def build_leaderboard(
             "run `safl-bench run` first or pass --results DIR"
         )
     out = Path(out_dir)
-    report = BuildReport(out_dir=out)
+    report = BuildReport(out_dir=out, table2_variants=list(table2_variants))
     writer = _Writer(out, report)
     groups, group_notes = group_records(records)
     entries: list[_Entry] = []

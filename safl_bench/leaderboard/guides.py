@@ -21,6 +21,7 @@ from safl_bench.leaderboard.headline import facts_markdown
 from safl_bench.leaderboard.readme import replace_block
 from safl_bench.leaderboard.report import BuildReport, PublishedTable
 from safl_bench.leaderboard.tables import MODE_LABELS, Table
+from safl_bench.results.records import ResultRecord
 
 GENERATED = "<!-- written by `safl-bench leaderboard` from the leaderboard's records; do not edit -->"
 
@@ -151,11 +152,140 @@ def _format(row: table2.Row, measure: str) -> str:
     return "not run" if iv is None else iv.format(100.0)
 
 
+def _mean(iv: object) -> str:
+    from safl_bench.evaluation.uncertainty import Interval
+
+    return "—" if not isinstance(iv, Interval) else iv.format(100.0).split(" [")[0]
+
+
+def table_ii_variants(report: BuildReport) -> str | None:
+    """What each measured change (the Table II variants, `leaderboard/experiments/table2/`)
+    gives on each condition, beside the row it changes, our measure; then the paper's order
+    with the changed rows in place of the rows they change."""
+    if not report.table2 or not report.table2_variants:
+        return None
+    rows, rel = report.table2[min(report.table2)]
+    measure = table2.MEASURES[0][0]
+    lines = ["| Change | Method | Version | " + " | ".join(table2.CONDITIONS) + " |",
+             "|---|---|---|" + "---:|" * len(table2.CONDITIONS)]
+    orders: list[str] = []
+    for variant in report.table2_variants:
+        changed: list[table2.Row] = []
+        keys = sorted({(r.method.name, r.method.version) for r in variant.records},
+                      key=lambda mv: (table2.PAPER_ORDER.index(mv[0]) if mv[0] in table2.PAPER_ORDER else 9, mv[1]))
+        for name, version in keys:
+            if name not in table2.PAPER_NAMES:
+                continue
+            base = {r.condition: r for r in rows if r.method == name and r.version == version
+                    and "selected on the test set" not in r.weights and "iterations" not in r.weights}
+            cells = []
+            for condition in table2.CONDITIONS:
+                found = variant.cell(name, version, condition)
+                iv = None if found is None else found.get(measure)
+                before = base.get(condition)
+                cells.append(f"{_mean(before.ours.get(measure) if before else None)} → {_mean(iv)}")
+                if iv is not None and before is not None:
+                    changed.append(dataclasses.replace(before, ours={**before.ours, measure: iv},
+                                                       weights=f"{before.weights}; `{variant.name}`"))
+            lines.append(f"| `{variant.name}`: {variant.label} | {table2.PAPER_NAMES[name].split(' (')[0]} | "
+                         f"{version} | " + " | ".join(cells) + " |")
+        ids = {(r.method, r.version, r.weights) for r in changed}
+        names = {r.method for r in changed}
+        kept = [r for r in rows if r.method not in names]
+        for order in table2.order_counts([*kept, *changed], measure):
+            if order.upper in ids or order.lower in ids:
+                orders.append(f"| {_order_name(order.upper)} | {_order_name(order.lower)} | "
+                              f"{order.holds} | {order.tied} | {order.reversed} |")
+    return "\n".join([
+        "Each change measured on the twelve conditions (records under "
+        "`leaderboard/experiments/table2/<change>/`, the same seeds and presets as the rows above; "
+        "our measure, mean over seeds): the row as the leaderboard has it → with the change.", "",
+        *lines, "",
+        "The paper's order with a changed row in place of the row it changes (our measure; "
+        "overlapping intervals are a tie):", "",
+        "| The paper's order: above | below | holds | tied | reversed |", "|---|---|---:|---:|---:|",
+        *orders, "",
+        f"Every cell outside its interval, with what each change gives there and its interval: "
+        f"`leaderboard/{rel}`."])
+
+
+def _order_name(key: tuple[str, str, str]) -> str:
+    return f"{table2.PAPER_NAMES[key[0]].split(' (')[0]} @{key[1]} ({key[2]})"
+
+
+#: The label under which `build` publishes BEVPlace's protocol table.
+BEVPLACE_LABEL = "Recall@1/5/10, F1max"
+
+
+def bevplace_reproduction(report: BuildReport) -> str | None:
+    """BEVPlace's protocol, newest task version on real KITTI top views: Recall@1 per method,
+    version and sequence, single frame (with the count of queries it matched, of those with a
+    true place) and with the sequence matcher, beside BEVPlace's published values."""
+    from safl_bench.leaderboard.tables import (
+        PUBLISHED_BEVPLACE,
+        PUBLISHED_SEQUENCES,
+        SEEN_MARK,
+        UNTRAINED_MARK,
+    )
+    from safl_bench.methods.training_data import record_seen, record_untrained
+
+    found = [t for t in report.tables if t.key.source_kind == "bev" and t.key.protocol == "bevplace"
+             and t.label == BEVPLACE_LABEL]
+    if not found:
+        return None
+    published = max(found, key=lambda t: t.key.task_version)
+    table = published.table
+    sequences = sorted({r.task.sequence for r in published.records})
+    by: dict[tuple[str, str, str], list[ResultRecord]] = {}
+    for r in published.records:
+        version = r.method.version + (SEEN_MARK if record_seen(r) is not None else "")
+        version += UNTRAINED_MARK if record_untrained(r) else ""
+        by.setdefault((r.method.name, version, r.task.sequence), []).append(r)
+    seeds = sorted({r.seed for r in published.records})
+    header = "| Method | Version | " + " | ".join(
+        f"{s} single frame | {s} sequence" for s in sequences) + " |"
+    lines = [header, "|---|---|" + "---:|---:|" * len(sequences)]
+    for name, values in PUBLISHED_BEVPLACE.items():
+        if name == "BEVPlace":
+            shown = [f"{values[PUBLISHED_SEQUENCES.index(s)]:.1f}" if s in PUBLISHED_SEQUENCES else "—"
+                     for s in sequences]
+            lines.append("| BEVPlace (published) | — | " + " | ".join(f"{v} | —" for v in shown) + " |")
+    versions = list(dict.fromkeys((row[0], row[1]) for row in table.rows))
+    for name, version in versions:
+        cells = []
+        for sequence in sequences:
+            recs = by.get((name, version, sequence), [])
+            for mode in ("single_frame", "sequence"):
+                results = [r.results[mode].metrics for r in recs if mode in r.results]
+                if not results:
+                    cells.append("—")
+                    continue
+                if any(m.n_correct is None or m.n_positives is None for m in results):
+                    known = [m.recall_at_1 for m in results if m.recall_at_1 is not None]
+                    cells.append(f"{100.0 * sum(known) / len(known):.1f}" if known else "n/a")
+                    continue
+                correct = sum(int(m.n_correct or 0) for m in results)
+                positives = sum(int(m.n_positives or 0) for m in results)
+                text = f"{100.0 * correct / positives:.1f}" if positives else "n/a"
+                cells.append(f"{text} ({correct} of {positives})" if mode == "single_frame" else text)
+        lines.append(f"| {name} | {version} | " + " | ".join(cells) + " |")
+    over = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))} pooled"
+    return "\n".join([
+        f"BEVPlace's protocol, task version v{published.key.task_version}, Recall@1 (%) over the "
+        f"scored queries with a true place, {over}: single frame (the nearest database frame; in "
+        "brackets the queries it matched within the true-place radius, of those with a true place) "
+        "and with the paper's sequence matcher; BEVPlace's published values (Luo et al., ICCV 2023, "
+        "Table 1) are single frame:", "", *lines, "", *_queries_note(table), "",
+        f"Intervals, Recall@5 and @10 and F1max: `leaderboard/{published.md}`."])
+
+
 #: Every generated block of the guides.
 BLOCKS: tuple[Block, ...] = (
     Block("docs/guides/leaderboard.md", "synthetic-table2", synthetic_table_ii),
     Block("docs/guides/leaderboard.md", "synthetic-revisit", synthetic_revisit),
     Block("docs/guides/reproduce-table-ii.md", "table2-summary", table_ii_summary),
+    Block("docs/guides/reproduce-table-ii.md", "table2-variants", table_ii_variants),
+    Block("docs/guides/reproduce-bevplace.md", "bevplace-reproduction", bevplace_reproduction),
 )
 
 

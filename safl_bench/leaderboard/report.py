@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from safl_bench.leaderboard.grouping import TableKey
-from safl_bench.leaderboard.table2 import Row
+from safl_bench.leaderboard.table2 import Row, Variant
 from safl_bench.leaderboard.tables import Table
 from safl_bench.results.records import Problem, ResultRecord
 
@@ -53,6 +53,8 @@ class BuildReport:
     #: per table group with Table II: the lines on the paper's order and on each cell outside
     #: its interval (`table2.orders`, `table2.causes`)
     table2_notes: dict[TableKey, tuple[list[str], list[str]]] = field(default_factory=dict)
+    #: the Table II variants the build read (`table2.load_variants`): what each measured change gives
+    table2_variants: list[Variant] = field(default_factory=list)
 
 
 def headline_rank(key: TableKey) -> tuple[object, ...]:
