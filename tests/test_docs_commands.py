@@ -213,3 +213,18 @@ def test_the_cli_reference_page_is_printed_by_the_parser() -> None:
             assert f"`safl-bench {command}`" in page
     assert "--no-site" in page and "--bev-root" in page  # options come from the parser itself
     assert "<!-- cli-reference -->" in (REPO / "docs" / "reference" / "cli.md").read_text()
+
+
+def test_the_readme_is_a_short_front_door() -> None:
+    """At most 200 lines; its set-up is two commands, one that installs and runs the main job
+    on the embedded default (the bare name the project is known by), one that installs and runs
+    the tests; and one meaning of bold (the headline's), Table II marking its cells otherwise."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 200
+    setup = text.split("## Set-up", 1)[1].split("\n## ", 1)[0]
+    commands = re.findall(r"```bash\n(.*?)\n```", setup, flags=re.S)
+    assert len(commands) == 2
+    assert commands[0].startswith("python3 -m venv") and commands[0].endswith("safl-bench run --method stable_afl")
+    assert commands[1].startswith("python3 -m venv") and commands[1].endswith("python -m pytest -q")
+    table2 = text.split("<!-- table2:start -->", 1)[1].split("<!-- table2:end -->", 1)[0]
+    assert "**" not in table2

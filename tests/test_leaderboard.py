@@ -301,7 +301,7 @@ def test_tables_are_deterministic_and_stale_files_removed(tmp_path: Path) -> Non
     # the revisit protocol heads the board (what the field reports), the paper's tables follow
     assert report.headline is not None and report.headline.key.protocol == "revisit"
     index = files["index.md"].decode()
-    assert "## Headline" in index and "**Protocol:** revisit" in index.split("## Headline")[1]
+    assert "## Headline" in index and "Protocol: revisit" in index.split("## Headline")[1]
     recall = files[f"tables/{SRC}/paper-00-v0-recall.md"].decode()
     assert "| stable_afl | 1 | sequence | ≈ 90.9 | 58.4 |" in recall
     # Regenerating without the revisit record removes its table and keeps hand-written files.

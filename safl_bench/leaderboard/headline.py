@@ -54,7 +54,7 @@ def facts(table: Table, records: Sequence[ResultRecord]) -> list[tuple[str, str]
 
 def facts_markdown(table: Table, records: Sequence[ResultRecord]) -> str:
     """The facts as one Markdown line."""
-    return " · ".join(f"**{name}:** {value}" for name, value in facts(table, records))
+    return " · ".join(f"{name}: {value}" for name, value in facts(table, records))  # no bold: it means best
 
 
 def readme_block(table: Table, records: Sequence[ResultRecord], link: str) -> str:
