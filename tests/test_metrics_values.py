@@ -280,6 +280,26 @@ def test_true_place_ranks_checks() -> None:
     assert metrics.true_place_ranks(np.zeros((1, 4)), [[3]]).tolist() == [4]
 
 
+def test_true_place_ranks_of_more_queries_than_a_row_block() -> None:
+    # the ranks are counted 256 queries at a time: 600 queries (some without a true place, some
+    # with a limit) must get the ranks of a plain count, query by query
+    rng = np.random.default_rng(4)
+    D = rng.integers(0, 30, (600, 40)).astype(np.float32)  # ties included
+    true = [np.sort(rng.choice(30, rng.integers(0, 3), replace=False)) for _ in range(600)]
+    limit = rng.integers(30, 41, 600)
+    for db_limit in (None, limit):
+        got = metrics.true_place_ranks(D, true, db_limit=db_limit)
+        for i in range(600):
+            js = np.asarray(true[i], dtype=np.int64)
+            if not js.size:
+                assert got[i] == 0
+                continue
+            j = js[np.argmin(D[i, js])]
+            cand = np.arange(40 if db_limit is None else limit[i])
+            nearer = (D[i, cand] < D[i, j]) | ((D[i, cand] == D[i, j]) & (cand < j))
+            assert got[i] == 1 + int(nearer.sum()), i
+
+
 def test_recall_at_n_by_hand() -> None:
     ranks = np.array([1, 0, 3, 2, 10])
     has = ranks > 0
