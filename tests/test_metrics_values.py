@@ -281,15 +281,17 @@ def test_true_place_ranks_checks() -> None:
 
 
 def test_true_place_ranks_of_more_queries_than_a_row_block() -> None:
-    # the ranks are counted 256 queries at a time: 600 queries (some without a true place, some
-    # with a limit) must get the ranks of a plain count, query by query
+    # the ranks are counted 256 queries with a true place at a time: 800 queries (the first 50
+    # without a true place, all with a limit or none) must get the ranks of a plain count
+    n = 800
     rng = np.random.default_rng(4)
-    D = rng.integers(0, 30, (600, 40)).astype(np.float32)  # ties included
-    true = [np.sort(rng.choice(30, rng.integers(0, 3), replace=False)) for _ in range(600)]
-    limit = rng.integers(30, 41, 600)
+    D = rng.integers(0, 30, (n, 40)).astype(np.float32)  # ties included
+    true = [np.sort(rng.choice(30, 0 if i < 50 else rng.integers(1, 3), replace=False))
+            for i in range(n)]
+    limit = rng.integers(30, 41, n)
     for db_limit in (None, limit):
         got = metrics.true_place_ranks(D, true, db_limit=db_limit)
-        for i in range(600):
+        for i in range(n):
             js = np.asarray(true[i], dtype=np.int64)
             if not js.size:
                 assert got[i] == 0
