@@ -234,3 +234,25 @@ def test_site_shows_table_ii_in_the_papers_layout_readable_at_1400_pixels(tmp_pa
         assert box is not None and box["x"] >= 0 and box["x"] + box["width"] <= 1400
         assert view.evaluate("document.documentElement.scrollWidth") <= 1400
         browser.close()
+
+
+def test_all_results_names_each_records_weights_and_derivation() -> None:
+    """The long CSV says which weights a record ran (untrained networks named as such) and which
+    superseded task's record a derived one keeps the matches of."""
+    from dataclasses import replace
+
+    from record_factory import make_record
+
+    from safl_bench.leaderboard.tables import all_results_frame
+    from safl_bench.results.records import Derivation, MethodInfo
+
+    plain = make_record("sad", seed=0)
+    untrained = replace(make_record("stable_afl", seed=1), method=MethodInfo(
+        name="stable_afl", version="2", params={"weights": {"source": "untrained", "seed": 0}}))
+    derived = replace(make_record("bigan", seed=2), derived_from=Derivation(
+        task="SAFL/Synth00-T1R1-v4", created="2026-12-01T00:00:00Z", note="derived"))
+    frame = all_results_frame([plain, untrained, derived]).set_index("method")
+    assert frame.loc["stable_afl", "weights"].tolist() == ["untrained", "untrained"]
+    assert frame.loc["sad", "weights"].tolist() == ["", ""]
+    assert frame.loc["bigan", "derived_from"].tolist() == ["SAFL/Synth00-T1R1-v4"] * 2
+    assert frame.loc["sad", "derived_from"].tolist() == ["", ""]

@@ -846,6 +846,8 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                     "spec_fingerprint": r.task.spec_fingerprint,
                     "method": r.method.name,
                     "method_version": r.method.version,
+                    # "shipped", "untrained" (random networks), "file", or "" (nothing learned)
+                    "weights": str((r.method.params.get("weights") or {}).get("source", "")),
                     "seed": r.seed,
                     "matching": MODE_LABELS[mode],
                     "recall_at_100_precision": _num(m.recall_at_100_precision, 4),
@@ -873,6 +875,8 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                     "matcher": json.dumps(r.matcher, sort_keys=True),
                     "cpu": r.environment.cpu_model,
                     "git_revision": r.environment.git_revision,
+                    # the superseded task whose record's matches this one keeps (`results.derive`)
+                    "derived_from": "" if r.derived_from is None else r.derived_from.task,
                 }
             )
     return pd.DataFrame(rows)
