@@ -43,6 +43,7 @@ COMMANDS: dict[str, Command | dict[str, Command]] = {
     },
     "run": ("run", "run a method on benchmark tasks and store result records"),
     "explain": ("explain", "draw one cell's matrices, matches, scores and worst false positives to a PNG"),
+    "slam": ("slam", "what one revisit cell's loop closures do to the trajectory: GTSAM back-ends, ATE/RPE (evo)"),
     "train": ("train", "train a learned method (BiGAN, Stable-AFL) on the training sequences"),
     "train-curve": ("train_curve", "evaluate a training run's snapshots: AUC against steps (Figure 14)"),
     "compare": ("compare", "compare two methods task by task, paired, with 95 %% intervals and a verdict"),

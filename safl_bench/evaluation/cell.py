@@ -70,14 +70,15 @@ def match_outcomes(truth: GroundTruth, result: MatchResult,
     """The label layer: each query's reported match labelled against the task's ground truth
     (`safl_bench.evaluation.metrics` defines what each label counts as). A match in the band between the
     true- and false-positive radii is ambiguous; a match to a frame the query may not match is
-    wrong; a query the matcher could not answer (index -1) reported no match."""
+    wrong; a query the matcher could not answer (index -1) reported no match. Each query's
+    matched database frame is kept (`Outcomes.match`) for the loop-closure stage."""
     claimed = result.index >= 0
     labels = np.zeros(len(result.index), dtype=np.int8)
     answered = np.flatnonzero(claimed)
     labels[answered] = truth.label_of(answered, result.index[answered])
     return outcomes(result.confidence, claimed & (labels == TP), truth.has_loop,
                     ambiguous=claimed & (labels == EXCLUDED), has_candidate=truth.has_candidate,
-                    true_rank=ranks)
+                    true_rank=ranks, match=np.where(claimed, result.index, -1))
 
 
 def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:

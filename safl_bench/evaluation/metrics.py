@@ -137,6 +137,9 @@ class Outcomes:
     has_true_place: np.ndarray  # bool
     has_candidate: np.ndarray  # bool
     true_rank: np.ndarray | None = None  # int64, 1-based rank of the nearest true place; 0 = none
+    #: int64, the database frame each query matched (-1 = no match reported); read by the
+    #: loop-closure stage (`safl_bench.slam`), never by a measure; None in older records
+    match: np.ndarray | None = None
 
 
 @dataclass
@@ -212,10 +215,12 @@ def outcomes(
     ambiguous: Any = None,
     has_candidate: Any = None,
     true_rank: Any = None,
+    match: Any = None,
 ) -> Outcomes:
     """Validated `Outcomes` from per-query arrays: `is_correct` (the reported match is a true
     place), `ambiguous` (it lies in the band: neither correct nor wrong; None = none does),
-    `has_candidate` (None = every query has one), `true_rank` (optional)."""
+    `has_candidate` (None = every query has one), `true_rank` (optional), `match` (optional:
+    the matched database frame, -1 = none)."""
     conf = _confidence(confidence)
     n = conf.shape[0]
     correct = _bool_array(is_correct, "is_correct", n)
@@ -238,8 +243,16 @@ def outcomes(
         if ((rank > 0) != has_true).any():
             raise DataError("true_rank must be >= 1 exactly where a query has a true place")
         rank = rank.astype(np.int64)
+    matched = None
+    if match is not None:
+        matched = np.asarray(match)
+        if (matched.shape != (n,) or not np.issubdtype(matched.dtype, np.integer)
+                or (matched < -1).any()):
+            raise DataError(f"match must be integers >= -1 of shape ({n},), got "
+                            f"{matched.dtype} {matched.shape}")
+        matched = matched.astype(np.int64)
     return Outcomes(confidence=conf, label=label, has_true_place=has_true, has_candidate=cand,
-                    true_rank=rank)
+                    true_rank=rank, match=matched)
 
 
 def evaluate(

@@ -62,7 +62,8 @@ def _slice(queries: QueryOutcomes, drop: int) -> QueryOutcomes:
     return QueryOutcomes(
         confidence=queries.confidence[drop:], label=queries.label[drop:],
         has_true_place=queries.has_true_place[drop:], has_candidate=queries.has_candidate[drop:],
-        true_rank=None if queries.true_rank is None else queries.true_rank[drop:])
+        true_rank=None if queries.true_rank is None else queries.true_rank[drop:],
+        match=None if queries.match is None else queries.match[drop:])
 
 
 def dropped_queries(record: ResultRecord, new: TaskSpec) -> int:

@@ -103,6 +103,8 @@ def _one_length(queries: QueryOutcomes) -> QueryOutcomes:
                len(queries.has_candidate)}
     if queries.true_rank is not None:
         lengths.add(len(queries.true_rank))
+    if queries.match is not None:
+        lengths.add(len(queries.match))
     if len(lengths) != 1:
         raise ValueError("its per-query lists differ in length")
     return queries
@@ -209,7 +211,9 @@ class QueryOutcomes:
     """Each scored query's outcome (`safl_bench.evaluation.metrics.Outcomes` as JSON): what the measures
     read, so that they can be recomputed from the record. confidence: None = no match
     reported; label: 1 correct, 0 ambiguous, -1 wrong; has_true_place, has_candidate: 0 or 1;
-    true_rank: rank of the nearest true place (0 = none), single-frame mode only."""
+    true_rank: rank of the nearest true place (0 = none), single-frame mode only; match: the
+    database frame each query matched (-1 = none; what the loop-closure stage, `safl_bench.slam`,
+    reads), absent from records made before it was stored."""
 
     __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
 
@@ -218,6 +222,7 @@ class QueryOutcomes:
     has_true_place: list[Annotated[int, Strict(), Field(ge=0, le=1)]]
     has_candidate: list[Annotated[int, Strict(), Field(ge=0, le=1)]]
     true_rank: list[Count] | None = None
+    match: list[Annotated[int, Strict(), Field(ge=-1)]] | None = None
 
     @classmethod
     def of(cls, o: Outcomes) -> QueryOutcomes:
@@ -227,6 +232,7 @@ class QueryOutcomes:
             has_true_place=[int(v) for v in o.has_true_place.tolist()],
             has_candidate=[int(v) for v in o.has_candidate.tolist()],
             true_rank=None if o.true_rank is None else [int(v) for v in o.true_rank.tolist()],
+            match=None if o.match is None else [int(v) for v in o.match.tolist()],
         )
 
     def outcomes(self) -> Outcomes:
@@ -237,6 +243,7 @@ class QueryOutcomes:
             has_true_place=np.array(self.has_true_place, dtype=bool),
             has_candidate=np.array(self.has_candidate, dtype=bool),
             true_rank=None if self.true_rank is None else np.array(self.true_rank, np.int64),
+            match=None if self.match is None else np.array(self.match, np.int64),
         )
 
 

@@ -1,0 +1,84 @@
+"""`safl-bench slam`: what one cell's loop closures do to the trajectory, from its result record."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from safl_bench.cli.options import add_bev_arguments, seed
+
+HELP = (
+    "Run one cell (method, revisit task, seed) through a pose-graph back-end from its result "
+    "record (no descriptor is recomputed): the task's ground-truth motion with seeded odometry "
+    "drift, the record's matches above a confidence threshold as loop closures (true ones with "
+    "registration noise, false ones random), solved by GTSAM with least squares, a Cauchy kernel "
+    "and GNC (truncated least squares); prints ATE and RPE (evo) of each beside the odometry "
+    "alone and writes them as JSON beside the record. Needs safl-bench[slam] (gtsam, evo). "
+    "Modelling choices and sources: docs/guides/slam.md."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from safl_bench.slam.model import DEFAULT_DRIFT, DRIFT_LEVELS
+
+    parser.add_argument("--method", required=True, metavar="NAME[@VERSION]",
+                        help="the method of the cell (its record's; a bare name is the version run "
+                             "on the task's data)")
+    parser.add_argument("--task", required=True, metavar="ID", help="a revisit task's id")
+    parser.add_argument("--seed", type=seed, help="the cell's seed (default: the task's own); "
+                                                  "it also seeds the drift and closure noise")
+    parser.add_argument("--threshold", type=float, metavar="CONFIDENCE",
+                        help="accept matches with at least this confidence (within the record's "
+                             "range); default: the oracle operating point, the lowest threshold "
+                             "whose closures are all true, chosen on this cell; confidences are "
+                             "negative scores: write --threshold=-12.5")
+    parser.add_argument("--drift", choices=list(DRIFT_LEVELS), default=DEFAULT_DRIFT,
+                        help="odometry drift level (default %(default)s; docs/guides/slam.md)")
+    parser.add_argument("--mode", choices=["sequence", "single_frame"], default="sequence",
+                        help="whose matches become closures (default %(default)s)")
+    parser.add_argument("--rpe-delta", type=float, default=100.0, metavar="M",
+                        help="the distance of the RPE in metres (default %(default)s)")
+    parser.add_argument("--results", metavar="DIR",
+                        help="records directory (default: $SAFL_RESULTS or ./results)")
+    parser.add_argument("--out", metavar="JSON",
+                        help="the result file (default: slam-seed-<n>.json beside the record)")
+    parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root (KITTI tasks)")
+    add_bev_arguments(parser)
+
+
+def main(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from safl_bench.errors import DataError
+    from safl_bench.methods.method import method_class, resolve_method
+    from safl_bench.results.records import default_results_dir, load_record, record_path
+    from safl_bench.slam.cell import SlamSettings, result_path, run_slam, table, write_result
+    from safl_bench.tasks.registry import runnable_spec
+    from safl_bench.tasks.task import Task
+
+    results = Path(args.results) if args.results else default_results_dir()
+    registered = runnable_spec(args.task)
+    cell_seed = registered.seed if args.seed is None else int(args.seed)
+    cls = method_class(resolve_method(args.method, registered.source))
+    path = record_path(results, cls.name, cls.version, registered.id, cell_seed)
+    if not path.is_file():
+        raise DataError(f"no record of {cls.name}@{cls.version} on {registered.id} seed {cell_seed} "
+                        f"in {results}; make it with: safl-bench run --method {cls.name}@{cls.version} "
+                        f"--task {registered.id} --seed {cell_seed}")
+    record = load_record(path)
+    spec = registered if cell_seed == registered.seed else dataclasses.replace(registered, seed=cell_seed)
+    task = Task.from_spec(spec, kitti_root=args.kitti_root, bev_root=args.bev_root,
+                          bev_resolution_m=args.bev_resolution, progress=False)
+    try:
+        import evo  # noqa: F401
+        import gtsam  # noqa: F401
+    except ImportError:
+        raise DataError("the loop-closure stage needs gtsam and evo: pip install "
+                        "'safl-bench[slam]'") from None
+    result = run_slam(record, task, SlamSettings(mode=args.mode, drift=args.drift,
+                                                 threshold=args.threshold,
+                                                 rpe_delta_m=args.rpe_delta))
+    out = write_result(Path(args.out) if args.out else result_path(results, record), result)
+    print(table(result))
+    print(f"result: {out}")
+    return 0

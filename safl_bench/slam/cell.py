@@ -1,0 +1,266 @@
+"""One loop-closure cell: a (method, revisit task, seed) record's matches through the pose graph.
+
+`run_slam` reads the record's per-query outcomes of one matching mode (each query's matched
+database frame, confidence and label: `safl_bench.results.records.QueryOutcomes`), the task's
+ground-truth poses (positions and headings of its frames), and returns what the closures the
+record accepts at a confidence threshold do to the trajectory, with every back-end
+(`backend.BACKENDS`), beside the odometry alone. Nothing is recomputed from views.
+
+Poses: the revisit protocol's queries are its database frames (every `step`-th frame of the
+sequence), so pose i is query i and database frame i; the first ``max_frames`` of them when the
+record's evaluation settings limit the frames. A record holds the outcomes of its scored queries,
+``[max(context_queries, trim_queries), M - trim_queries)`` of the M matched
+(`safl_bench.evaluation.cell.scored_queries`), so stored outcome k is pose ``start + k``.
+
+Closures: every scored query whose match has a confidence at or above the threshold. It is true
+when the record labels it correct (its match lies within the task's true-positive radius); an
+ambiguous match (in the band between the radii) or a wrong one is a false closure. Threshold:
+a number in the range of the record's confidences, or None for the oracle operating point (the
+lowest threshold at which every accepted closure is true, chosen on the cell itself: peeking,
+and named so wherever it is printed).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from safl_bench.common.atomic import atomic_write_text
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.evaluation.metrics import CORRECT
+from safl_bench.results.records import ResultRecord, record_path, rerun_command, utc_now
+from safl_bench.slam.backend import BACKENDS, solve, trajectory_errors
+from safl_bench.slam.model import (
+    DEFAULT_DRIFT,
+    closure_measurements,
+    drift_level,
+    simulate_odometry,
+)
+
+if TYPE_CHECKING:
+    from safl_bench.tasks.task import Task
+
+#: Version of this stage's model and output; bumped when either changes.
+SLAM_VERSION = 1
+DEFAULT_RPE_DELTA_M = 100.0
+
+
+@dataclass(frozen=True)
+class SlamSettings:
+    """What a loop-closure cell is run with: the matching mode whose matches become closures,
+    the odometry drift level, the confidence threshold (None: the oracle operating point) and
+    the distance of the RPE."""
+
+    mode: str = "sequence"
+    drift: str = DEFAULT_DRIFT
+    threshold: float | None = None
+    rpe_delta_m: float = DEFAULT_RPE_DELTA_M
+
+
+@dataclass(frozen=True)
+class BackendResult:
+    """One back-end's outcome: errors (None when it did not converge), how it ended, and for GNC
+    the true and false closures it kept."""
+
+    backend: str
+    converged: bool
+    note: str
+    ate_m: float | None
+    rpe_m: float | None
+    kept_true: int | None = None
+    kept_false: int | None = None
+
+
+@dataclass(frozen=True)
+class SlamResult:
+    """A loop-closure cell's result (written as JSON by `write_result`)."""
+
+    method: str  # name@version
+    task: str
+    seed: int
+    settings: dict[str, Any]
+    threshold: float | None  # the one applied (None: no closure accepted)
+    threshold_rule: str
+    drift: dict[str, Any]
+    n_poses: int
+    closures_true: int
+    closures_false: int
+    odometry_ate_m: float
+    odometry_rpe_m: float | None
+    backends: list[BackendResult]
+    seconds: float
+    record_created: str
+    #: how ATE is measured: after Umeyama's alignment, or (a straight true path) without
+    ate_alignment: str = "Umeyama, SE(3), no scale"
+    created: str = field(default_factory=utc_now)
+    slam_version: int = SLAM_VERSION
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _cell(record: ResultRecord) -> str:
+    return f"{record.method.name}@{record.method.version} on {record.task.id} seed {record.seed}"
+
+
+def poses_of(task: Task) -> np.ndarray:
+    """(n, 3) ground-truth x, y, yaw of the task's query frames; a DataError for a task whose data
+    has no poses, a ConfigError for one whose queries are not its database frames."""
+    if task.spec.protocol != "revisit" or not np.array_equal(task.query_frames, task.database_frames):
+        raise ConfigError(f"task {task.id}: the loop-closure stage runs on revisit tasks (queries "
+                          f"are the database frames of one sequence), not on a {task.spec.protocol} "
+                          "task")
+    if task.query_headings is None:
+        raise DataError(f"task {task.id}: its data has no ground-truth poses (headings), which the "
+                        "pose graph needs; run it on a source with poses (KITTI, top-view folders, "
+                        "the synthetic default)")
+    return np.column_stack([task.query_positions, task.query_headings])
+
+
+def oracle_threshold(confidence: np.ndarray, correct: np.ndarray) -> float | None:
+    """The lowest confidence at which every accepted match is correct (None: the most confident
+    match is not, so no threshold keeps any closure true)."""
+    wrong = confidence[~correct]
+    ceiling = float(wrong.max()) if len(wrong) else -math.inf
+    above = confidence[correct & (confidence > ceiling)]
+    return float(above.min()) if len(above) else None
+
+
+def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = None) -> SlamResult:
+    """The loop-closure cell of `record` on `task` (module doc). Raises DataError for a record
+    without the per-query matches it needs (naming the command that recomputes it), ConfigError
+    for a threshold outside the record's confidences."""
+    settings = settings or SlamSettings()
+    level = drift_level(settings.drift)
+    if not settings.rpe_delta_m > 0:
+        raise ConfigError(f"the RPE distance must be > 0 m, got {settings.rpe_delta_m}")
+    t0 = time.perf_counter()
+    if record.task.id != task.id:
+        raise ConfigError(f"the record of {_cell(record)} is not of task {task.id}")
+    mode = record.results.get(settings.mode)
+    if mode is None:
+        raise DataError(f"{_cell(record)}: the record has no {settings.mode!r} matching mode "
+                        f"(it has {', '.join(record.results)})")
+    if mode.queries is None:
+        raise DataError(f"{_cell(record)}: the record holds no per-query outcomes (metrics version "
+                        f"{record.metrics_version}); recompute it: {rerun_command(record)}")
+    if mode.queries.match is None:
+        raise DataError(f"{_cell(record)}: the record predates per-query matches (which database "
+                        f"frame each query matched); recompute it: {rerun_command(record)}")
+    poses = poses_of(task)
+    evaluation = record.matcher.get("evaluation", {})
+    trim = int(evaluation.get("trim_queries") or 0)
+    max_frames = evaluation.get("max_frames")
+    n = len(poses) if max_frames is None else min(len(poses), int(max_frames))
+    start = max(task.spec.context_queries, trim)
+    outcomes = mode.queries.outcomes()
+    assert outcomes.match is not None
+    if len(outcomes.match) != n - start - trim:
+        raise DataError(f"{_cell(record)}: {len(outcomes.match)} stored outcomes, expected "
+                        f"{n - start - trim} ({n} frames, queries {start} to {n - trim - 1} scored); "
+                        f"recompute it: {rerun_command(record)}")
+    poses = poses[:n]
+    answered = outcomes.match >= 0
+    if (outcomes.match >= n).any():
+        raise DataError(f"{_cell(record)}: a stored match is beyond the task's {n} frames")
+    confidence = outcomes.confidence
+    correct = outcomes.label == CORRECT
+    if settings.threshold is None:
+        threshold = oracle_threshold(confidence[answered], correct[answered])
+        rule = "oracle: the lowest at which every accepted closure is true, chosen on this cell"
+    else:
+        threshold = float(settings.threshold)
+        values = confidence[answered]
+        if not len(values):
+            raise DataError(f"{_cell(record)}: no query reported a match, so there is no "
+                            "threshold to apply")
+        low, high = float(values.min()), float(values.max())
+        if not low <= threshold <= high:
+            raise ConfigError(f"threshold {threshold:g} is outside the confidences of {_cell(record)} "
+                              f"({low:g} to {high:g}); pick one in that range")
+        rule = "given"
+    accepted = answered & (confidence >= threshold) if threshold is not None else np.zeros_like(answered)
+    index = np.flatnonzero(accepted)
+    closures = closure_measurements(poses, start + index, outcomes.match[index], correct[index],
+                                    confidence[index], record.seed)
+    odometry = simulate_odometry(poses, level, record.seed)
+    reference = trajectory_errors(poses, odometry.trajectory, settings.rpe_delta_m)
+    results = []
+    for name in BACKENDS:
+        solution = solve(poses[0], odometry, closures, name)
+        if solution.trajectory is None:
+            results.append(BackendResult(name, False, solution.note, None, None))
+            continue
+        errors = trajectory_errors(poses, solution.trajectory, settings.rpe_delta_m)
+        kept_true = kept_false = None
+        if solution.kept is not None:
+            kept_true = int((solution.kept & closures.true).sum())
+            kept_false = int((solution.kept & ~closures.true).sum())
+        results.append(BackendResult(name, True, solution.note, errors.ate_m, errors.rpe_m,
+                                     kept_true, kept_false))
+    return SlamResult(
+        method=f"{record.method.name}@{record.method.version}", task=task.id, seed=record.seed,
+        settings=asdict(settings), threshold=threshold, threshold_rule=rule,
+        drift={"level": level.name, "translation_pct": level.translation_pct,
+               "heading_deg_per_100m": level.heading_deg_per_100m, "source": level.source},
+        n_poses=n, closures_true=int(closures.true.sum()),
+        closures_false=int((~closures.true).sum()), odometry_ate_m=reference.ate_m,
+        odometry_rpe_m=reference.rpe_m, backends=results,
+        seconds=round(time.perf_counter() - t0, 3), record_created=record.created,
+        ate_alignment=("Umeyama, SE(3), no scale" if reference.aligned else "none: the true path "
+                       "is a straight line; errors in the frame of the first pose"))
+
+
+def result_path(results_dir: str | os.PathLike[str], record: ResultRecord) -> Path:
+    """Where a record's loop-closure result goes: beside the record, ``slam-seed-<n>.json`` (a
+    name `load_records`, which reads ``seed-*.json``, never takes for a record)."""
+    path = record_path(results_dir, record.method.name, record.method.version, record.task.id,
+                       record.seed)
+    return path.with_name(f"slam-{path.name}")
+
+
+def write_result(path: str | os.PathLike[str], result: SlamResult) -> Path:
+    """Write `result` as indented JSON, atomically."""
+    text = json.dumps(result.to_json(), indent=2, sort_keys=True, allow_nan=False) + "\n"
+    atomic_write_text(Path(path), text)
+    return Path(path)
+
+
+def _metres(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
+
+
+def table(result: SlamResult) -> str:
+    """The result as a few lines of text: settings, closures, and one row per back-end."""
+    drift = result.drift
+    threshold = ("none reaches 100 % precision: no closure" if result.threshold is None
+                 else f"{result.threshold:g}")
+    delta = result.settings["rpe_delta_m"]
+    lines = [
+        f"{result.method} on {result.task} seed {result.seed}: {result.n_poses} poses, "
+        f"{result.settings['mode']} matches",
+        f"odometry drift {drift['level']} ({drift['translation_pct']:g} %, "
+        f"{drift['heading_deg_per_100m']:g} deg/100 m); threshold {threshold} ({result.threshold_rule})",
+        f"closures accepted: {result.closures_true} true, {result.closures_false} false; ATE "
+        f"alignment: {result.ate_alignment}",
+        "",
+        f"{'back-end':<16}{'ATE RMSE (m)':>14}{f'RPE {delta:g} m (m)':>16}  note",
+        f"{'odometry alone':<16}{_metres(result.odometry_ate_m):>14}{_metres(result.odometry_rpe_m):>16}",
+    ]
+    for b in result.backends:
+        if not b.converged:
+            lines.append(f"{b.backend:<16}{'did not converge':>30}  {b.note}")
+            continue
+        note = b.note
+        if b.kept_true is not None:
+            note = f"kept {b.kept_true} true, {b.kept_false} false closures"
+        lines.append(f"{b.backend:<16}{_metres(b.ate_m):>14}{_metres(b.rpe_m):>16}  {note}")
+    lines.append(f"({result.seconds:.2f} s)")
+    return "\n".join(lines)

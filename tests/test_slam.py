@@ -1,0 +1,258 @@
+"""The loop-closure stage (`safl_bench.slam`, `safl-bench slam`): pose graphs built here on small
+trajectories, and one revisit cell run from a record made here (never real KITTI)."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import write_bev
+
+pytest.importorskip("gtsam")
+pytest.importorskip("evo")
+
+from safl_bench import tasks
+from safl_bench.cli import main as cli_main
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.results.records import dumps_record, load_record
+from safl_bench.slam import cell as slam_cell
+from safl_bench.slam.backend import solve, trajectory_errors
+from safl_bench.slam.model import (
+    DRIFT_LEVELS,
+    between,
+    closure_measurements,
+    compose,
+    integrate,
+    simulate_odometry,
+    wrap,
+)
+
+
+def loop_poses(laps: int = 2, step: float = 4.0) -> np.ndarray:
+    """A 400 m x 250 m block driven `laps` times, a pose every `step` metres, heading along."""
+    corners = np.array([[0, 0], [400, 0], [400, 250], [0, 250], [0, 0]], float)
+    points = []
+    for a, b in itertools.pairwise(corners):
+        n = round(float(np.linalg.norm(b - a)) / step)
+        points += [a + (b - a) * k / n for k in range(n)]
+    xy = np.array(points * laps)
+    heading = np.arctan2(*(np.roll(xy, -1, axis=0) - xy)[:, ::-1].T)
+    return np.column_stack([xy, heading])
+
+
+def revisit_closures(poses: np.ndarray, every: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """(query, match): the second lap's poses matched to the same place on the first."""
+    lap = len(poses) // 2
+    query = np.arange(lap, len(poses), every)
+    return query, query - lap
+
+
+def test_se2_helpers_invert_each_other() -> None:
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
+    np.testing.assert_allclose(compose(a, between(a, b))[:, :2], b[:, :2], atol=1e-12)
+    poses = loop_poses(1)
+    again = integrate(poses[0], between(poses[:-1], poses[1:]))
+    np.testing.assert_allclose(again[:, :2], poses[:, :2], atol=1e-9)
+    np.testing.assert_allclose(wrap(again[:, 2] - poses[:, 2]), 0.0, atol=1e-9)
+
+
+def test_drift_levels_are_cited_and_odometry_is_seeded() -> None:
+    assert list(DRIFT_LEVELS) == ["low", "mid", "high"]
+    assert all(level.source for level in DRIFT_LEVELS.values())
+    poses = loop_poses()
+    a, b = (simulate_odometry(poses, DRIFT_LEVELS["mid"], 3) for _ in range(2))
+    np.testing.assert_array_equal(a.trajectory, b.trajectory)
+    other = simulate_odometry(poses, DRIFT_LEVELS["mid"], 4)
+    assert not np.array_equal(a.trajectory, other.trajectory)
+    errors = [trajectory_errors(poses, simulate_odometry(poses, DRIFT_LEVELS[name], 3).trajectory,
+                                100.0).ate_m for name in ("low", "high")]
+    assert 0 < errors[0] < errors[1]
+
+
+def test_true_closures_pull_the_trajectory_back_to_the_truth() -> None:
+    poses = loop_poses()
+    odometry = simulate_odometry(poses, DRIFT_LEVELS["high"], 0)
+    query, match = revisit_closures(poses)
+    closures = closure_measurements(poses, query, match, np.ones(len(query), bool),
+                                    np.ones(len(query)), seed=0)
+    alone = trajectory_errors(poses, odometry.trajectory, 100.0)
+    for backend in ("least-squares", "cauchy", "gnc-tls"):
+        solution = solve(poses[0], odometry, closures, backend)
+        assert solution.converged, solution.note
+        assert solution.trajectory is not None
+        errors = trajectory_errors(poses, solution.trajectory, 100.0)
+        # the 3 % scale error stays; a Cauchy kernel started from the drifted odometry discounts
+        # the true closures that are far from it, so it corrects less than the other two
+        assert errors.ate_m < (0.95 if backend == "cauchy" else 0.7) * alone.ate_m, backend
+    assert solution.kept is not None and solution.kept.mean() > 0.9  # GNC keeps most true ones
+
+
+def test_a_false_closure_hurts_least_squares_more_than_gnc() -> None:
+    poses = loop_poses()
+    odometry = simulate_odometry(poses, DRIFT_LEVELS["mid"], 1)
+    query, match = revisit_closures(poses)
+    wrong_q, wrong_m = np.array([len(poses) - 40, len(poses) - 100]), np.array([60, 10])
+    closures = closure_measurements(
+        poses, np.r_[query, wrong_q], np.r_[match, wrong_m],
+        np.r_[np.ones(len(query), bool), np.zeros(2, bool)], np.ones(len(query) + 2), seed=1)
+    ate = {}
+    for backend in ("least-squares", "gnc-tls"):
+        solution = solve(poses[0], odometry, closures, backend)
+        assert solution.converged and solution.trajectory is not None, solution.note
+        ate[backend] = trajectory_errors(poses, solution.trajectory, 100.0).ate_m
+    assert ate["least-squares"] > 2 * ate["gnc-tls"]
+    assert solution.kept is not None and not solution.kept[-2:].any() and solution.kept[:-2].mean() > 0.9
+
+
+def test_the_oracle_threshold_keeps_only_true_closures() -> None:
+    confidence = np.array([5.0, 4.0, 3.0, 2.0, 1.0])
+    assert slam_cell.oracle_threshold(confidence, np.array([1, 1, 0, 1, 1], bool)) == 4.0
+    assert slam_cell.oracle_threshold(confidence, np.array([0, 1, 1, 1, 1], bool)) is None
+    assert slam_cell.oracle_threshold(confidence, np.ones(5, bool)) == 1.0
+
+
+# --------------------------------------------------------------------------------------------
+# One revisit cell, from a record made here: the fixture folder's route drives 30 m out and back
+
+
+TASK = "Test/SlamTiny-Revisit-v0"
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, Path]]:
+    """(top-view root, results folder) holding SAD's record of a tiny revisit task."""
+    from safl_bench.methods.method import make_method
+    from safl_bench.run import runner
+
+    base = tmp_path_factory.mktemp("slam")
+    root = write_bev(base / "bev", n=60)
+    results = base / "results"
+    tasks.register(TASK, source="bev", sequence="00", protocol="revisit", step=1,
+                   tp_radius_m=3.0, fp_radius_m=20.0, window_s=5.0)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SAFL_HOME", str(base / "home"))
+        options = runner.RunOptions(results_dir=results, bev_root=str(root), progress=False,
+                                    timing_frames=3, timing_repeats=1)
+        out = runner.run_cell(make_method("sad"), TASK, options, log=lambda message: None)
+        assert out.status == "computed", out.message
+        yield root, results
+    tasks.unregister(TASK)
+
+
+def _run(capsys: pytest.CaptureFixture[str], root: Path, results: Path,
+         *extra: str) -> tuple[int, str, str]:
+    code = cli_main(["slam", "--method", "sad", "--task", TASK, "--bev-root", str(root),
+                     "--results", str(results), "--rpe-delta", "10", *extra])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _record_file(results: Path) -> Path:
+    (path,) = results.rglob("seed-0.json")
+    return path
+
+
+def test_the_record_holds_each_querys_match(cell: tuple[Path, Path]) -> None:
+    record = load_record(_record_file(cell[1]))
+    for mode in record.results.values():
+        assert mode.queries is not None and mode.queries.match is not None
+        o = mode.queries.outcomes()
+        assert o.match is not None
+        np.testing.assert_array_equal(o.match >= 0, np.isfinite(o.confidence))
+
+
+def test_slam_prints_a_table_and_writes_the_same_result_for_a_seed(
+        cell: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    root, results = cell
+    code, out, err = _run(capsys, root, results)
+    assert code == 0, err
+    for word in ("odometry alone", "least-squares", "cauchy", "gnc-tls", "closures accepted", "oracle"):
+        assert word in out
+    (path,) = results.rglob("slam-seed-0.json")
+    first = json.loads(path.read_text())
+    assert [b["backend"] for b in first["backends"]] == ["least-squares", "cauchy", "gnc-tls"]
+    assert first["closures_false"] == 0 and first["n_poses"] == 60
+    assert _run(capsys, root, results)[0] == 0
+    again = json.loads(path.read_text())
+    for result in (first, again):
+        result.pop("created"), result.pop("seconds")
+    assert again == first
+
+
+def test_a_threshold_below_every_match_accepts_them_all(cell: tuple[Path, Path],
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    root, results = cell
+    record = load_record(_record_file(results))
+    queries = record.results["sequence"].queries
+    assert queries is not None and queries.match is not None
+    match, confidence = np.array(queries.match), queries.outcomes().confidence
+    low = float(confidence[match >= 0].min())
+    out = results / "all.json"
+    code, _, err = _run(capsys, root, results, "--threshold", repr(low), "--out", str(out))
+    assert code == 0, err
+    data = json.loads(out.read_text())
+    assert data["closures_true"] + data["closures_false"] == int((match >= 0).sum())
+    assert data["threshold_rule"] == "given"
+
+
+def _one_line_error(code: int, err: str) -> str:
+    assert code == 2
+    assert err.count("\n") == 1 and "Traceback" not in err
+    return err
+
+
+def test_bad_input_is_one_line(cell: tuple[Path, Path], capsys: pytest.CaptureFixture[str],
+                               tmp_path: Path) -> None:
+    root, results = cell
+    err = _one_line_error(*_run(capsys, root, results, "--threshold", "1e9")[::2])
+    assert "outside the confidences" in err
+    # a record made before the matches were stored, and one without per-query outcomes
+    old = tmp_path / "old"
+    path = _record_file(results)
+    target = old / path.relative_to(results)
+    target.parent.mkdir(parents=True)
+    data = json.loads(path.read_text())
+    for mode in data["results"].values():
+        del mode["queries"]["match"]
+    target.write_text(dumps_record(data))
+    err = _one_line_error(*_run(capsys, root, old)[::2])
+    assert "predates per-query matches" in err and "--force" in err
+    for mode in data["results"].values():
+        mode["queries"] = None
+    target.write_text(dumps_record(data))
+    err = _one_line_error(*_run(capsys, root, old)[::2])
+    assert "no per-query outcomes" in err and "--force" in err
+
+
+def test_a_task_without_poses_or_not_a_revisit_task_is_refused() -> None:
+    from safl_bench.tasks.spec import TaskSpec
+    from safl_bench.tasks.task import Task
+
+    positions = np.column_stack([np.arange(10.0), np.zeros(10)])
+    spec = TaskSpec(id="Test/NoPoses-Revisit-v0", source="bev", sequence="00", protocol="revisit",
+                    step=1, tp_radius_m=3.0, fp_radius_m=20.0, window_s=1.0)
+    views = np.zeros((10, 8, 8), np.float32)
+    task = Task.from_arrays(spec, positions=positions, times=np.arange(10.0), database=views,
+                            queries=views)
+    with pytest.raises(DataError, match="no ground-truth poses"):
+        slam_cell.poses_of(task)
+    paper = TaskSpec(id="Test/NoPoses-T1R1-v0", source="bev", sequence="00", condition="T1R1", step=1)
+    with pytest.raises(ConfigError, match="revisit tasks"):
+        slam_cell.poses_of(Task.from_arrays(paper, positions=positions, times=np.arange(10.0),
+                                            database=views, queries=views))
+
+
+def test_outcomes_keep_a_valid_match_per_query() -> None:
+    from safl_bench.evaluation.metrics import outcomes
+
+    o = outcomes([2.0, -np.inf], [True, False], [True, False], match=np.array([5, -1], np.int32))
+    assert o.match is not None and o.match.dtype == np.int64 and o.match.tolist() == [5, -1]
+    assert outcomes([1.0], [True], [True]).match is None
+    for bad in ([-2, 0], [1], [0.5, 1.0]):
+        with pytest.raises(DataError, match="match must be integers >= -1"):
+            outcomes([2.0, 1.0], [True, True], [True, True], match=np.array(bad))
