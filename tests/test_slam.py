@@ -121,6 +121,7 @@ def test_the_oracle_threshold_keeps_only_true_closures() -> None:
 
 
 TASK = "Test/SlamTiny-Revisit-v0"
+OTHER = "Test/SlamTiny02-Revisit-v0"  # another sequence, to choose a threshold on
 
 
 @pytest.fixture(scope="module")
@@ -131,17 +132,21 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, Path]
 
     base = tmp_path_factory.mktemp("slam")
     root = write_bev(base / "bev", n=60)
+    write_bev(root, name="02", n=60, seed=1)
     results = base / "results"
-    tasks.register(TASK, source="bev", sequence="00", protocol="revisit", step=1,
-                   tp_radius_m=3.0, fp_radius_m=20.0, window_s=5.0)
+    for task_id, sequence in ((TASK, "00"), (OTHER, "02")):
+        tasks.register(task_id, source="bev", sequence=sequence, protocol="revisit", step=1,
+                       tp_radius_m=3.0, fp_radius_m=20.0, window_s=5.0)
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("SAFL_HOME", str(base / "home"))
         options = runner.RunOptions(results_dir=results, bev_root=str(root), progress=False,
                                     timing_frames=3, timing_repeats=1)
-        out = runner.run_cell(make_method("sad"), TASK, options, log=lambda message: None)
-        assert out.status == "computed", out.message
+        for task_id in (TASK, OTHER):
+            out = runner.run_cell(make_method("sad"), task_id, options, log=lambda message: None)
+            assert out.status == "computed", out.message
         yield root, results
     tasks.unregister(TASK)
+    tasks.unregister(OTHER)
 
 
 def _run(capsys: pytest.CaptureFixture[str], root: Path, results: Path,
@@ -153,7 +158,7 @@ def _run(capsys: pytest.CaptureFixture[str], root: Path, results: Path,
 
 
 def _record_file(results: Path) -> Path:
-    (path,) = results.rglob("seed-0.json")
+    (path,) = results.rglob("Test__SlamTiny-Revisit-v0/seed-0.json")
     return path
 
 
@@ -198,6 +203,22 @@ def test_a_threshold_below_every_match_accepts_them_all(cell: tuple[Path, Path],
     data = json.loads(out.read_text())
     assert data["closures_true"] + data["closures_false"] == int((match >= 0).sum())
     assert data["threshold_rule"] == "given"
+
+
+def test_a_threshold_chosen_on_another_sequence_is_deployed(
+        cell: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    root, results = cell
+    out = results / "deployed.json"
+    code, text, err = _run(capsys, root, results, "--threshold-from", OTHER, "--out", str(out))
+    assert code == 0, err
+    data = json.loads(out.read_text())
+    assert data["threshold_rule"].startswith(f"deployed: the lowest keeping 100 % precision on {OTHER}")
+    other = load_record(next(results.rglob("Test__SlamTiny02-Revisit-v0/seed-0.json")))
+    assert data["threshold"] == slam_cell.deployed_threshold(other)
+    assert "deployed" in text
+    err = _one_line_error(*_run(capsys, root, results, "--threshold-from", OTHER,
+                                "--threshold", "1")[::2])
+    assert "not both" in err
 
 
 def _one_line_error(code: int, err: str) -> str:

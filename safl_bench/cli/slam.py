@@ -32,6 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "range); default: the oracle operating point, the lowest threshold "
                              "whose closures are all true, chosen on this cell; confidences are "
                              "negative scores: write --threshold=-12.5")
+    parser.add_argument("--threshold-from", metavar="ID",
+                        help="deploy the threshold chosen on another task instead: the lowest that "
+                             "keeps 100 %% precision in the method's record there (same seed), "
+                             "e.g. KITTI 02's revisit task for KITTI 00's")
     parser.add_argument("--drift", choices=list(DRIFT_LEVELS), default=DEFAULT_DRIFT,
                         help="odometry drift level (default %(default)s; docs/guides/slam.md)")
     parser.add_argument("--mode", choices=["sequence", "single_frame"], default="sequence",
@@ -49,10 +53,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from safl_bench.errors import DataError
+    from safl_bench.errors import ConfigError, DataError
     from safl_bench.methods.method import method_class, resolve_method
-    from safl_bench.results.records import default_results_dir, load_record, record_path
-    from safl_bench.slam.cell import SlamSettings, result_path, run_slam, table, write_result
+    from safl_bench.results.records import (
+        ResultRecord,
+        default_results_dir,
+        load_record,
+        record_path,
+    )
+    from safl_bench.slam.cell import (
+        SlamSettings,
+        deployed_threshold,
+        result_path,
+        run_slam,
+        table,
+        write_result,
+    )
     from safl_bench.tasks.registry import runnable_spec
     from safl_bench.tasks.task import Task
 
@@ -60,12 +76,24 @@ def main(args: argparse.Namespace) -> int:
     registered = runnable_spec(args.task)
     cell_seed = registered.seed if args.seed is None else int(args.seed)
     cls = method_class(resolve_method(args.method, registered.source))
-    path = record_path(results, cls.name, cls.version, registered.id, cell_seed)
-    if not path.is_file():
-        raise DataError(f"no record of {cls.name}@{cls.version} on {registered.id} seed {cell_seed} "
-                        f"in {results}; make it with: safl-bench run --method {cls.name}@{cls.version} "
-                        f"--task {registered.id} --seed {cell_seed}")
-    record = load_record(path)
+
+    def record_of(task_id: str) -> ResultRecord:
+        path = record_path(results, cls.name, cls.version, task_id, cell_seed)
+        if not path.is_file():
+            raise DataError(f"no record of {cls.name}@{cls.version} on {task_id} seed {cell_seed} in "
+                            f"{results}; make it with: safl-bench run --method "
+                            f"{cls.name}@{cls.version} --task {task_id} --seed {cell_seed}")
+        return load_record(path)
+
+    record = record_of(registered.id)
+    threshold, rule = args.threshold, None
+    if args.threshold_from is not None:
+        if args.threshold is not None:
+            raise ConfigError("give --threshold or --threshold-from, not both")
+        other = runnable_spec(args.threshold_from).id
+        threshold = deployed_threshold(record_of(other), args.mode)
+        rule = (f"deployed: the lowest keeping 100 % precision on {other} seed {cell_seed}, chosen "
+                "there" + ("" if threshold is not None else "; none does, so no closure"))
     spec = registered if cell_seed == registered.seed else dataclasses.replace(registered, seed=cell_seed)
     task = Task.from_spec(spec, kitti_root=args.kitti_root, bev_root=args.bev_root,
                           bev_resolution_m=args.bev_resolution, progress=False)
@@ -76,8 +104,8 @@ def main(args: argparse.Namespace) -> int:
         raise DataError("the loop-closure stage needs gtsam and evo: pip install "
                         "'safl-bench[slam]'") from None
     result = run_slam(record, task, SlamSettings(mode=args.mode, drift=args.drift,
-                                                 threshold=args.threshold,
-                                                 rpe_delta_m=args.rpe_delta))
+                                                 threshold=threshold, rpe_delta_m=args.rpe_delta,
+                                                 threshold_rule=rule))
     out = write_result(Path(args.out) if args.out else result_path(results, record), result)
     print(table(result))
     print(f"result: {out}")

@@ -62,6 +62,10 @@ class SlamSettings:
     drift: str = DEFAULT_DRIFT
     threshold: float | None = None
     rpe_delta_m: float = DEFAULT_RPE_DELTA_M
+    #: set when `threshold` was chosen elsewhere (`deployed_threshold`: on another sequence),
+    #: saying where; it is then applied as it is, outside this cell's confidences too (accepting
+    #: none or every match), and None accepts none
+    threshold_rule: str | None = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +137,19 @@ def oracle_threshold(confidence: np.ndarray, correct: np.ndarray) -> float | Non
     return float(above.min()) if len(above) else None
 
 
+def deployed_threshold(record: ResultRecord, mode: str = "sequence") -> float | None:
+    """The oracle threshold of `record` (`oracle_threshold`: the lowest that keeps every
+    accepted match correct there), to be deployed on another cell; None when none does. Reads
+    only confidences and labels, so any record with per-query outcomes will do."""
+    result = record.results.get(mode)
+    if result is None or result.queries is None:
+        raise DataError(f"{_cell(record)}: the record holds no per-query outcomes of its {mode!r} "
+                        f"matches to choose a threshold on; recompute it: {rerun_command(record)}")
+    o = result.queries.outcomes()
+    answered = np.isfinite(o.confidence)
+    return oracle_threshold(o.confidence[answered], o.label[answered] == CORRECT)
+
+
 def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = None) -> SlamResult:
     """The loop-closure cell of `record` on `task` (module doc). Raises DataError for a record
     without the per-query matches it needs (naming the command that recomputes it), ConfigError
@@ -172,9 +189,12 @@ def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = N
         raise DataError(f"{_cell(record)}: a stored match is beyond the task's {n} frames")
     confidence = outcomes.confidence
     correct = outcomes.label == CORRECT
-    if settings.threshold is None:
+    if settings.threshold_rule is not None:
+        threshold, rule = settings.threshold, settings.threshold_rule
+    elif settings.threshold is None:
         threshold = oracle_threshold(confidence[answered], correct[answered])
-        rule = "oracle: the lowest at which every accepted closure is true, chosen on this cell"
+        rule = ("oracle: the lowest at which every accepted closure is true, chosen on this cell"
+                + ("" if threshold is not None else "; none is"))
     else:
         threshold = float(settings.threshold)
         values = confidence[answered]
@@ -240,8 +260,7 @@ def _metres(value: float | None) -> str:
 def table(result: SlamResult) -> str:
     """The result as a few lines of text: settings, closures, and one row per back-end."""
     drift = result.drift
-    threshold = ("none reaches 100 % precision: no closure" if result.threshold is None
-                 else f"{result.threshold:g}")
+    threshold = "none (no closure)" if result.threshold is None else f"{result.threshold:g}"
     delta = result.settings["rpe_delta_m"]
     lines = [
         f"{result.method} on {result.task} seed {result.seed}: {result.n_poses} poses, "
