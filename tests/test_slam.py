@@ -221,6 +221,25 @@ def test_a_threshold_chosen_on_another_sequence_is_deployed(
     assert "not both" in err
 
 
+def test_a_curve_runs_from_no_closure_to_every_match(cell: tuple[Path, Path],
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    root, results = cell
+    out = results / "curve.json"
+    code, text, err = _run(capsys, root, results, "--curve", "4", "--out", str(out))
+    assert code == 0, err
+    curve = json.loads(out.read_text())["curve"]
+    assert curve[0]["threshold"] is None and curve[0]["closures_true"] + curve[0]["closures_false"] == 0
+    record = load_record(_record_file(results))
+    queries = record.results["sequence"].queries
+    assert queries is not None and queries.match is not None
+    last = curve[-1]
+    assert last["closures_true"] + last["closures_false"] == sum(m >= 0 for m in queries.match)
+    accepted = [r["closures_true"] + r["closures_false"] for r in curve]
+    assert accepted == sorted(accepted) and len(text.splitlines()) == 2 + len(curve) + 1
+    err = _one_line_error(*_run(capsys, root, results, "--curve", "4", "--threshold", "1")[::2])
+    assert "--curve takes its own thresholds" in err
+
+
 def _one_line_error(code: int, err: str) -> str:
     assert code == 2
     assert err.count("\n") == 1 and "Traceback" not in err

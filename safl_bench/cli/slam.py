@@ -36,6 +36,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="deploy the threshold chosen on another task instead: the lowest that "
                              "keeps 100 %% precision in the method's record there (same seed), "
                              "e.g. KITTI 02's revisit task for KITTI 00's")
+    parser.add_argument("--curve", type=int, metavar="N",
+                        help="instead of one threshold, N from no closure to every match (evenly "
+                             "spaced quantiles of the confidences): one line each, the curve as JSON "
+                             "(default slam-curve-seed-<n>.json beside the record)")
     parser.add_argument("--drift", choices=list(DRIFT_LEVELS), default=DEFAULT_DRIFT,
                         help="odometry drift level (default %(default)s; docs/guides/slam.md)")
     parser.add_argument("--mode", choices=["sequence", "single_frame"], default="sequence",
@@ -52,7 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     import dataclasses
+    import json
 
+    from safl_bench.common.atomic import atomic_write_text
     from safl_bench.errors import ConfigError, DataError
     from safl_bench.methods.method import method_class, resolve_method
     from safl_bench.results.records import (
@@ -63,10 +69,12 @@ def main(args: argparse.Namespace) -> int:
     )
     from safl_bench.slam.cell import (
         SlamSettings,
+        curve_table,
         deployed_threshold,
         result_path,
         run_slam,
         table,
+        threshold_curve,
         write_result,
     )
     from safl_bench.tasks.registry import runnable_spec
@@ -87,6 +95,9 @@ def main(args: argparse.Namespace) -> int:
 
     record = record_of(registered.id)
     threshold, rule = args.threshold, None
+    if args.curve is not None and (args.threshold is not None or args.threshold_from is not None):
+        raise ConfigError("--curve takes its own thresholds: give it without --threshold and "
+                          "--threshold-from")
     if args.threshold_from is not None:
         if args.threshold is not None:
             raise ConfigError("give --threshold or --threshold-from, not both")
@@ -103,9 +114,18 @@ def main(args: argparse.Namespace) -> int:
     except ImportError:
         raise DataError("the loop-closure stage needs gtsam and evo: pip install "
                         "'safl-bench[slam]'") from None
-    result = run_slam(record, task, SlamSettings(mode=args.mode, drift=args.drift,
-                                                 threshold=threshold, rpe_delta_m=args.rpe_delta,
-                                                 threshold_rule=rule))
+    settings = SlamSettings(mode=args.mode, drift=args.drift, threshold=threshold,
+                            rpe_delta_m=args.rpe_delta, threshold_rule=rule)
+    if args.curve is not None:
+        curve = threshold_curve(record, task, settings, args.curve)
+        default = result_path(results, record)
+        out = Path(args.out) if args.out else default.with_name(default.name.replace("slam-", "slam-curve-"))
+        atomic_write_text(out, json.dumps({"curve": [r.to_json() for r in curve]}, indent=2,
+                                          sort_keys=True, allow_nan=False) + "\n")
+        print(curve_table(curve))
+        print(f"result: {out}")
+        return 0
+    result = run_slam(record, task, settings)
     out = write_result(Path(args.out) if args.out else result_path(results, record), result)
     print(table(result))
     print(f"result: {out}")

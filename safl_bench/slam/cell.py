@@ -22,6 +22,7 @@ and named so wherever it is printed).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -236,6 +237,47 @@ def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = N
         seconds=round(time.perf_counter() - t0, 3), record_created=record.created,
         ate_alignment=("Umeyama, SE(3), no scale" if reference.aligned else "none: the true path "
                        "is a straight line; errors in the frame of the first pose"))
+
+
+def curve_thresholds(record: ResultRecord, mode: str = "sequence", points: int = 10) -> list[float | None]:
+    """`points` thresholds from no closure (None) to every match (the lowest confidence), the
+    rest at evenly spaced quantiles of the record's answered confidences, highest first."""
+    if points < 2:
+        raise ConfigError(f"a threshold curve needs at least 2 points, got {points}")
+    result = record.results.get(mode)
+    if result is None or result.queries is None:
+        raise DataError(f"{_cell(record)}: the record holds no per-query outcomes of its {mode!r} "
+                        f"matches; recompute it: {rerun_command(record)}")
+    confidence = result.queries.outcomes().confidence
+    answered = np.sort(confidence[np.isfinite(confidence)])[::-1]
+    if not len(answered):
+        raise DataError(f"{_cell(record)}: no query reported a match, so there is no curve")
+    levels = np.quantile(answered, np.linspace(1.0, 0.0, points)[1:], method="lower")
+    return [None, *dict.fromkeys(float(v) for v in levels)]
+
+
+def threshold_curve(record: ResultRecord, task: Task, settings: SlamSettings | None = None,
+                    points: int = 10) -> list[SlamResult]:
+    """The cell at each of `curve_thresholds` (the settings' own threshold is ignored): what the
+    trajectory error does from no closure to every match."""
+    settings = settings or SlamSettings()
+    return [run_slam(record, task, dataclasses.replace(
+                settings, threshold=t, threshold_rule=f"curve point {k + 1} of {points}"))
+            for k, t in enumerate(curve_thresholds(record, settings.mode, points))]
+
+
+def curve_table(curve: list[SlamResult]) -> str:
+    """One line per threshold: closures true and false, ATE of each back-end."""
+    first = curve[0]
+    names = [b.backend for b in first.backends]
+    lines = [f"{first.method} on {first.task} seed {first.seed}: ATE RMSE (m) against the "
+             f"threshold; odometry alone {first.odometry_ate_m:.2f} m",
+             f"{'threshold':>12}{'true':>6}{'false':>7}" + "".join(f"{n:>15}" for n in names)]
+    for r in curve:
+        threshold = "none" if r.threshold is None else f"{r.threshold:.4g}"
+        cells = "".join(f"{_metres(b.ate_m) if b.converged else 'no conv.':>15}" for b in r.backends)
+        lines.append(f"{threshold:>12}{r.closures_true:>6}{r.closures_false:>7}{cells}")
+    return "\n".join(lines)
 
 
 def result_path(results_dir: str | os.PathLike[str], record: ResultRecord) -> Path:
