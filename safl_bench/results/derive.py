@@ -34,15 +34,15 @@ from pathlib import Path
 from typing import Any
 
 from safl_bench.errors import DataError
-from safl_bench.evaluation.metrics import METRICS_VERSION, RECALL_AT, evaluate_outcomes
+from safl_bench.evaluation.metrics import METRICS_VERSION
 from safl_bench.results.records import (
     Derivation,
     ModeResult,
     QueryOutcomes,
     ResultRecord,
     load_records,
-    mode_result_from_evaluation,
     record_path,
+    rescore_outcomes,
     task_info,
     utc_now,
     write_record,
@@ -59,11 +59,11 @@ class NotDerivableError(DataError):
 
 
 def _slice(queries: QueryOutcomes, drop: int) -> QueryOutcomes:
-    return QueryOutcomes(
-        confidence=queries.confidence[drop:], label=queries.label[drop:],
-        has_true_place=queries.has_true_place[drop:], has_candidate=queries.has_candidate[drop:],
-        true_rank=None if queries.true_rank is None else queries.true_rank[drop:],
-        match=None if queries.match is None else queries.match[drop:])
+    """The outcomes without their first `drop` queries: every per-query list field (a field
+    added later is sliced too), the optional ones left None."""
+    sliced: dict[str, Any] = {f.name: None if (v := getattr(queries, f.name)) is None else v[drop:]
+                              for f in dataclasses.fields(queries)}
+    return dataclasses.replace(queries, **sliced)
 
 
 def dropped_queries(record: ResultRecord, new: TaskSpec) -> int:
@@ -113,10 +113,7 @@ def derive_record(record: ResultRecord, new: TaskSpec) -> ResultRecord:
     results: dict[str, ModeResult] = {}
     for name, mode in record.results.items():
         assert mode.queries is not None  # dropped_queries checked it
-        kept = _slice(mode.queries, drop)
-        o = kept.outcomes()
-        results[name] = mode_result_from_evaluation(
-            evaluate_outcomes(o, recall_at=RECALL_AT if o.true_rank is not None else ()), o)
+        results[name] = rescore_outcomes(_slice(mode.queries, drop))
     extra: dict[str, Any] = {k: v for k, v in record.task.spec.items()
                              if k not in _SPEC_KEYS and k not in old.definition()}
     first = max(new.context_queries, int(record.matcher.get("evaluation", {}).get("trim_queries") or 0))
@@ -187,10 +184,10 @@ def superseded_note(records: list[ResultRecord], folder: str | Path) -> str | No
     command that derives the current ones; None when there are none."""
     from safl_bench.tasks.builtin import successor
 
-    old = sorted({r.task.id for r in records if successor(r.task.id) is not None})
-    if not old:
+    ids = [r.task.id for r in records if successor(r.task.id) is not None]  # one registry scan each
+    if not ids:
         return None
-    n = sum(successor(r.task.id) is not None for r in records)
+    old, n = sorted(set(ids)), len(ids)
     shown = ", ".join(old[:3]) + (f" and {len(old) - 3} more" if len(old) > 3 else "")
     return (f"{n} records in {folder} are of task versions a newer one replaced ({shown}): they are "
             f"tabled under their own version, never beside the current one; `safl-bench records "

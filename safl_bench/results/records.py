@@ -508,10 +508,16 @@ def rescore(record: ResultRecord) -> ResultRecord:
     results = {}
     for name, mode in record.results.items():
         assert mode.queries is not None
-        o = mode.queries.outcomes()
-        results[name] = mode_result_from_evaluation(
-            evaluate_outcomes(o, recall_at=RECALL_AT if o.true_rank is not None else ()), o)
+        results[name] = rescore_outcomes(mode.queries)
     return dataclasses.replace(record, results=results, metrics_version=METRICS_VERSION)
+
+
+def rescore_outcomes(queries: QueryOutcomes) -> ModeResult:
+    """A matching mode's measures and curves recomputed under this code's metrics version from
+    its per-query outcomes (Recall@N where the outcomes hold ranks: single-frame mode)."""
+    o = queries.outcomes()
+    return mode_result_from_evaluation(
+        evaluate_outcomes(o, recall_at=RECALL_AT if o.true_rank is not None else ()), o)
 
 
 def task_info(spec: TaskSpec, source_label: str, **extra: Any) -> TaskInfo:
