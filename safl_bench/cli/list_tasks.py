@@ -10,6 +10,7 @@ from safl_bench.tasks.spec import TaskSpec
 HELP = "list the registered benchmark tasks (id, protocol, sequence, condition, source, scored queries)"
 
 SOURCE_NAMES = {"synth": "synthetic default", "kitti": "KITTI", "bev": "top-view images"}
+ROTATED_NAMES = {"queries": "queries", "both": "database and queries"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -29,7 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _row(spec: TaskSpec, details: bool) -> list[str]:
     condition = spec.condition.name if spec.protocol == "paper" else "-"
     scored = f"from query {spec.context_queries}" if spec.context_queries else "all queries"
-    row = [spec.id, spec.protocol, spec.sequence, condition, SOURCE_NAMES[spec.source], scored]
+    source = SOURCE_NAMES[spec.source] + (f", rotated {ROTATED_NAMES[spec.rotated]}" if spec.rotated else "")
+    row = [spec.id, spec.protocol, spec.sequence, condition, source, scored]
     if details:
         window = "-" if spec.window_s is None else f"{spec.window_s:g}"
         radii = (
@@ -63,7 +65,8 @@ def main(args: argparse.Namespace) -> int:
     print(format_table([_row(registry[i], args.fingerprints) for i in ids], header))
     print(
         f"\n{len(ids)} tasks. Synthetic tasks run out of the box; KITTI tasks need --kitti-root "
-        "or SAFL_KITTI_ROOT. Built-in paper protocol: database = clean maps of every 4th frame, queries = "
+        "or SAFL_KITTI_ROOT, top-view tasks --bev-root or SAFL_BEV_ROOT (rotated ones also "
+        "--bev-rot-root or SAFL_BEV_ROT_ROOT). Built-in paper protocol: database = clean maps of every 4th frame, queries = "
         "the same frames re-rendered with noise T{a}R{b}, true positive within 10 m; its first 10 queries, "
         "and those of BEVPlace's protocol, are context (matched, not scored). Built-in revisit: "
         "matches only to frames > 30 s older, true positive within 3 m, false positive beyond 20 m."

@@ -76,6 +76,18 @@ def add_bev_arguments(parser: Any) -> None:
                         help="metres per pixel of those images (default %(default)s, BEVPlace's)")
 
 
+def add_bev_rot_argument(parser: Any) -> None:
+    """--bev-rot-root DIR: the second image folder of the rotated top-view tasks (commands that
+    run tasks; the others read $SAFL_BEV_ROT_ROOT)."""
+    from safl_bench.sources import BEV_ROT_ROOT_ENV
+
+    parser.add_argument("--bev-rot-root", metavar="DIR",
+                        help="rotated top views of the same sequences, same layout (BEVPlace's "
+                             "data/KITTIRot: each scan yawed by its own random angle before its "
+                             "image was made): the queries of the bev-rotated tasks, and their "
+                             f"database where the task says so (also ${BEV_ROT_ROOT_ENV})")
+
+
 def source_kind(args: Any) -> str:
     """The source the command's options select: "kitti", "bev" or "synth" (the default); both
     --kitti-root and --bev-root is an error."""

@@ -9,6 +9,7 @@ from typing import Any
 
 from safl_bench.cli.options import (
     add_bev_arguments,
+    add_bev_rot_argument,
     add_parallel_arguments,
     parallel_from,
     parse_key_values,
@@ -35,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
     add_bev_arguments(parser)
+    add_bev_rot_argument(parser)
     seeds = parser.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=seed_count, metavar="N",
                        help="run the first N noise seeds of each task whose queries are random "
@@ -148,6 +150,7 @@ def main(args: argparse.Namespace) -> int:
         force=args.force,
         kitti_root=args.kitti_root,
         bev_root=args.bev_root,
+        bev_rot_root=args.bev_rot_root,
         bev_resolution_m=args.bev_resolution,
         evaluation=matcher_config(args.score, args.matcher, args.matcher_preset),
         progress=not args.quiet,

@@ -89,6 +89,7 @@ class RunOptions:
     kitti_root: str | None = None
     bev_root: str | None = None
     bev_resolution_m: float | None = None  # None: the source's default (0.4 m per pixel)
+    bev_rot_root: str | None = None  # the rotated top views (TaskSpec.rotated); None: $SAFL_BEV_ROT_ROOT
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
     timing_frames: int = 20
     timing_repeats: int = 5
@@ -245,7 +246,7 @@ def _task(registered: TaskSpec, seed: int, options: RunOptions, progress: bool,
         run_spec = dataclasses.replace(run_spec, map_config=config_for_encoding(encoding))
     return Task.from_spec(run_spec, kitti_root=options.kitti_root, bev_root=options.bev_root,
                           bev_resolution_m=options.bev_resolution_m, progress=progress,
-                          source=source)
+                          source=source, bev_rot_root=options.bev_rot_root)
 
 
 def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunOptions,
@@ -621,7 +622,7 @@ def _prepare_views(
     for i, seed in todo.items():
         _, task_id, opts = cells[i]
         registered = spec(task_id)
-        key = (registered.source, registered.data_seed, registered.sequence)
+        key = (registered.source, registered.data_seed, registered.sequence, registered.rotated)
         share = serial and opts.share_seeds
         try:
             tasks[i] = _task(registered, seed, opts, progress, cells[i][0],

@@ -17,7 +17,15 @@ from typing import Protocol
 
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.sources.base import DataSource
-from safl_bench.sources.bev import BEV_ROOT_ENV, DEFAULT_RESOLUTION_M, BevSource, bev_source
+from safl_bench.sources.bev import (
+    BEV_ROOT_ENV,
+    BEV_ROT_ROOT_ENV,
+    DEFAULT_RESOLUTION_M,
+    ROTATED_LABELS,
+    BevSource,
+    bev_source,
+    check_same_frames,
+)
 from safl_bench.sources.kitti import KittiSource, kitti_source
 from safl_bench.sources.synth import SynthSource, synth_source
 
@@ -36,14 +44,18 @@ class SourceSpec(Protocol):
     def data_seed(self) -> int: ...
     @property
     def sequence(self) -> str: ...
+    @property
+    def rotated(self) -> str | None: ...
 
 #: The option that points each real source at its data (for error messages).
 ROOT_OPTION = {"kitti": "--kitti-root DIR", "bev": "--bev-root DIR"}
+#: The option that points the rotated top-view tasks at their second image folder.
+ROT_ROOT_OPTION = "--bev-rot-root DIR"
 
 __all__ = [
-    "BEV_ROOT_ENV", "DEFAULT_RESOLUTION_M", "KINDS", "BevSource", "DataSource", "KittiSource",
-    "SynthSource", "bev_source", "kitti_source", "open_source", "real_roots", "resolve_source",
-    "synth_source",
+    "BEV_ROOT_ENV", "BEV_ROT_ROOT_ENV", "DEFAULT_RESOLUTION_M", "KINDS", "ROT_ROOT_OPTION",
+    "BevSource", "DataSource", "KittiSource", "SynthSource", "bev_source", "kitti_source",
+    "open_query_source", "open_source", "real_roots", "resolve_source", "synth_source",
 ]
 
 
@@ -76,14 +88,19 @@ def resolve_source(
 
 
 def open_source(spec: SourceSpec, *, kitti_root: str | None = None, bev_root: str | None = None,
-                bev_resolution_m: float = DEFAULT_RESOLUTION_M, progress: bool = True) -> DataSource:
-    """The data source a task spec names: the embedded default (generated on first use), the
+                bev_resolution_m: float = DEFAULT_RESOLUTION_M, progress: bool = True,
+                bev_rot_root: str | None = None) -> DataSource:
+    """The data source of a task's database: the embedded default (generated on first use), the
     KITTI root (`kitti_root`, else $SAFL_KITTI_ROOT) or the top-view images (`bev_root`, else
-    $SAFL_BEV_ROOT)."""
+    $SAFL_BEV_ROOT; a task whose database is rotated: `bev_rot_root`, else $SAFL_BEV_ROT_ROOT).
+    A rotated task's source carries its label (`ROTATED_LABELS`)."""
     from safl_bench import paths
 
     if spec.source == "synth":
         return synth_source(seed=spec.data_seed, sequences=(spec.sequence,), progress=progress)
+    rotated = getattr(spec, "rotated", None)
+    if spec.source == "bev" and rotated == "both":
+        return bev_source(_rot_root(spec, bev_rot_root), bev_resolution_m, ROTATED_LABELS[rotated])
     explicit = kitti_root if spec.source == "kitti" else bev_root
     env = paths.KITTI_ROOT_ENV if spec.source == "kitti" else BEV_ROOT_ENV
     value = explicit if explicit is not None else os.environ.get(env)
@@ -91,4 +108,29 @@ def open_source(spec: SourceSpec, *, kitti_root: str | None = None, bev_root: st
         raise DataError(f"task {spec.id} needs its data: pass {ROOT_OPTION[spec.source]} or set {env}")
     if spec.source == "kitti":
         return kitti_source(paths.kitti_root(value))
+    if rotated is not None:
+        return bev_source(value, bev_resolution_m, ROTATED_LABELS[rotated])
     return bev_source(value, bev_resolution_m)
+
+
+def _rot_root(spec: SourceSpec, bev_rot_root: str | None) -> str:
+    value = bev_rot_root if bev_rot_root is not None else os.environ.get(BEV_ROT_ROOT_ENV)
+    if not value:
+        raise DataError(f"task {spec.id} needs the rotated top-view images (BEVPlace's KITTIRot): "
+                        f"pass {ROT_ROOT_OPTION} or set {BEV_ROT_ROOT_ENV}")
+    return value
+
+
+def open_query_source(spec: SourceSpec, database: DataSource, *, bev_rot_root: str | None = None,
+                      bev_resolution_m: float = DEFAULT_RESOLUTION_M) -> DataSource | None:
+    """The source of a task's queries where it is not its database's: the second image folder
+    (`bev_rot_root`, else $SAFL_BEV_ROT_ROOT) of a task whose queries are rotated, checked to
+    hold the database folder's frames and poses (`check_same_frames`); None for any other task."""
+    if getattr(spec, "rotated", None) != "queries":
+        return None
+    queries = bev_source(_rot_root(spec, bev_rot_root), bev_resolution_m, database.label)
+    if Path(queries.root).resolve() == Path(database.root).resolve():
+        raise DataError(f"task {spec.id}: the rotated images ({ROT_ROOT_OPTION}) and the plain ones "
+                        f"(--bev-root) are the same folder {queries.root}")
+    check_same_frames(database.sequence(spec.sequence), queries.sequence(spec.sequence))
+    return queries

@@ -33,6 +33,14 @@ Choices, and why:
   re-render anything, so noisy queries are the images resampled to the moved viewpoint
   (`safl_bench.views.resample.move_viewpoint`: nearest neighbour, what comes from outside the image
   is empty).
+- A second image folder of the same sequences (`--bev-rot-root`, $SAFL_BEV_ROT_ROOT; BEVPlace's
+  `data/KITTIRot/` at commit 56483fd9, whose `data/gen_bev_images.py` yaws each scan about the
+  sensor by its own random angle, 0-359 degrees, before making its image) gives the views of the
+  rotated tasks (`TaskSpec.rotated`). Its frames must be the first folder's: as many images and
+  the same poses, line by line, to 1e-6 (`check_same_frames`; BEVPlace's two `pose.txt` are
+  byte-identical, the unrotated sensor's), else a one-line DataError naming both counts or the
+  first differing line. Records of those tasks carry their own source label (`ROTATED_LABELS`),
+  so the leaderboard tables them apart from the plain images.
 - The decoded images of a whole sequence are cached once, uncompressed uint8, under the map
   cache (`<home>/maps/bev-<seq>/images-<key>.npy`), keyed by the size and modification time of
   every image and text file and the resolution: a cached read is one memory-mapped file.
@@ -60,6 +68,14 @@ DEFAULT_RESOLUTION_M = 0.4
 #: Frame period assumed without `times.txt` (KITTI's LiDAR runs at 10 Hz).
 ASSUMED_PERIOD_S = 0.1
 BEV_ROOT_ENV = "SAFL_BEV_ROOT"
+#: The second image folder of the same sequences (BEVPlace's KITTIRot): the rotated tasks' views.
+BEV_ROT_ROOT_ENV = "SAFL_BEV_ROT_ROOT"
+BEV_LABEL = "KITTI top-view images"
+#: The source label of a rotated task's records (`TaskSpec.rotated` -> label), and so of its table.
+ROTATED_LABELS = {"queries": f"{BEV_LABEL}, rotated queries (KITTIRot)",
+                  "both": f"{BEV_LABEL}, rotated database and queries (KITTIRot)"}
+#: Two folders' poses of one frame may differ by this much (m, and in each rotation entry).
+SAME_POSE_TOLERANCE = 1e-6
 IMAGE_CACHE_VERSION = 1
 #: Optional files of a sequence that carry KITTI's ground truth (module docstring).
 KITTI_POSES, KITTI_CALIB = "kitti_poses.txt", "calib.txt"
@@ -125,6 +141,22 @@ def open_bev_sequence(root: Path, name: str) -> BevSequence:
     else:
         times, assumed = np.arange(len(files), dtype=np.float64) / (1.0 / ASSUMED_PERIOD_S), True
     return BevSequence(name, folder, files, poses, times, assumed, pose_file)
+
+
+def check_same_frames(first: BevSequence, second: BevSequence) -> None:
+    """DataError in one line unless two image folders of one sequence show the same frames: as
+    many images, and the same pose on every line (within `SAME_POSE_TOLERANCE`)."""
+    a, b = first.folder / "imgs", second.folder / "imgs"
+    if len(first) != len(second):
+        raise DataError(f"{b} has {len(second)} images but {a} has {len(first)}: the two image "
+                        f"folders of sequence {first.name} must hold the same frames")
+    differs = np.abs(first.poses[:, :3, :] - second.poses[:, :3, :]).reshape(len(first), -1).max(axis=1)
+    bad = np.flatnonzero(~(differs <= SAME_POSE_TOLERANCE))
+    if len(bad):
+        i = int(bad[0])
+        raise DataError(f"{second.folder / second.pose_file} line {i + 1} differs from "
+                        f"{first.folder / first.pose_file} line {i + 1} (by {differs[i]:.3g}): the two "
+                        f"image folders of sequence {first.name} must hold the same frames and poses")
 
 
 def decode_image(path: Path) -> np.ndarray:
@@ -238,9 +270,10 @@ class BevSource(DataSource):
         return seq._images
 
 
-def bev_source(root: str | Path, resolution_m: float = DEFAULT_RESOLUTION_M) -> BevSource:
-    """A top-view image folder (BEVPlace's layout)."""
+def bev_source(root: str | Path, resolution_m: float = DEFAULT_RESOLUTION_M,
+               label: str = BEV_LABEL) -> BevSource:
+    """A top-view image folder (BEVPlace's layout); `label` names it in records and tables."""
     path = Path(root).expanduser()
     if not path.is_dir():
         raise DataError(f"top-view image root {path} does not exist or is not a directory")
-    return BevSource(root=path, label="KITTI top-view images", resolution_m=float(resolution_m))
+    return BevSource(root=path, label=label, resolution_m=float(resolution_m))

@@ -20,6 +20,16 @@ are the images resampled to the moved viewpoint (there are no points to re-rende
 neighbour, what comes from outside the image is empty; at T20 up to a third of a 60.4 m wide
 view along the shift, see `safl_bench.views.resample`).
 
+Rotated top views (BEVPlace's KITTIRot, a second image folder of the same sequences whose every
+scan was yawed by its own random angle before its image was made; `--bev-rot-root`): on 00, 02,
+05 and 06, the revisit and BEVPlace protocols with the queries from the rotated folder and the
+database from the plain one (`SAFL/BEVKITTI00-Revisit-RotQueries-v0`,
+`SAFL/BEVKITTI00-BEVPlace-RotQueries-v1`), and BEVPlace's protocol with both from the rotated
+folder (`SAFL/BEVKITTIRot00-BEVPlace-v1`), which is what BEVPlace's own main.py scores. Each is
+the current plain task of its protocol (frames, ground truth, context queries, version) with
+`TaskSpec.rotated` set; they are in the suite `bev-rotated` (and `all`), not in `revisit`,
+`bev-revisit` or `bev-bevplace`, whose commands need one image root only.
+
 Versions (`TASK_VERSION`, per protocol and source). The paper protocol is at v5 on the synthetic
 default and v1 on KITTI scans and top-view images, BEVPlace's protocol at v1: these versions
 leave the first `CONTEXT_QUERIES` (the paper's d_s = 10) queries out of every measure
@@ -56,6 +66,8 @@ REVISIT_FP_RADIUS_M = 20.0
 PAPER_SEQUENCES = ("00", "09")
 REVISIT_SEQUENCES = {"synth": ("00", "09"), "kitti": ("00", "05", "08"), "bev": ("00", "02", "05", "06")}
 SOURCE_LABEL = {"synth": "Synth", "kitti": "KITTI", "bev": "BEVKITTI"}
+#: The top-view tasks on rotated images: `TaskSpec.rotated` -> protocols it is registered for.
+ROTATED_PROTOCOLS = {"queries": ("revisit", "bevplace"), "both": ("bevplace",)}
 #: Sequences of the paper protocol per source (the top-view images: KITTI 00 only).
 PAPER_SOURCE_SEQUENCES = {"synth": PAPER_SEQUENCES, "kitti": PAPER_SEQUENCES, "bev": ("00",)}
 #: BEVPlace's protocol (its dataset.py): [start, stop) database and query frames per sequence.
@@ -78,10 +90,13 @@ SUITES = {
     "bev-revisit": "revisit protocol on the top-view images of KITTI 00, 02, 05, 06 (--bev-root)",
     "bev-bevplace": "BEVPlace's protocol on the top-view images of KITTI 00, 02, 05, 06 (--bev-root)",
     "bev-paper": "the paper's twelve conditions on the top-view images of KITTI 00 (--bev-root)",
+    "bev-rotated": "revisit and BEVPlace's protocols with BEVPlace's rotated top views (KITTIRot) of "
+                   "KITTI 00, 02, 05, 06 as queries (--bev-root, --bev-rot-root), and BEVPlace's "
+                   "protocol on the rotated views alone, as its main.py (--bev-rot-root)",
     "all": "every built-in task",
 }
 #: Suites of one source only: they ignore the source a command's options select.
-SOURCE_SUITES = {"bev-revisit": "bev", "bev-bevplace": "bev", "bev-paper": "bev"}
+SOURCE_SUITES = {"bev-revisit": "bev", "bev-bevplace": "bev", "bev-paper": "bev", "bev-rotated": "bev"}
 
 _BUILTIN: dict[str, list[str]] = {name: [] for name in SUITES}
 #: Built-in tasks of older versions: registered (their records resolve), in no suite.
@@ -209,6 +224,32 @@ def _bevplace(source: str, sequence: str, version: int | None = None) -> TaskSpe
     )
 
 
+def rotated_id(sequence: str, protocol: str, rotated: str) -> str:
+    """Id of a top-view task on rotated images, e.g. SAFL/BEVKITTI02-BEVPlace-RotQueries-v1
+    (queries rotated) or SAFL/BEVKITTIRot02-BEVPlace-v1 (database and queries rotated). Its
+    version is the plain task's it copies (`TASK_VERSION`), so that equal versions of a protocol
+    mean equal rules (BEVPlace's v1: the first 10 queries are context)."""
+    name = "BEVPlace" if protocol == "bevplace" else "Revisit"
+    version = TASK_VERSION[protocol]["bev"]
+    if rotated == "both":
+        return f"{NAMESPACE}/{SOURCE_LABEL['bev']}Rot{sequence}-{name}-v{version}"
+    return f"{NAMESPACE}/{SOURCE_LABEL['bev']}{sequence}-{name}-RotQueries-v{version}"
+
+
+def _rotated(sequence: str, protocol: str, rotated: str) -> TaskSpec:
+    """The current plain top-view task of `protocol` on `sequence` with its queries (or its
+    database and queries) from the rotated images."""
+    import dataclasses
+
+    plain = _bevplace("bev", sequence) if protocol == "bevplace" else _revisit("bev", sequence)
+    which = "queries" if rotated == "queries" else "database and queries"
+    return dataclasses.replace(
+        plain, id=rotated_id(sequence, protocol, rotated), rotated=rotated,
+        description=(f"{plain.description}; {which} from the rotated top views (BEVPlace's "
+                     "KITTIRot, --bev-rot-root: each scan yawed by its own random angle)"
+                     + (", as BEVPlace's main.py scores" if rotated == "both" else "")))
+
+
 def _add(suites: tuple[str, ...], task: TaskSpec) -> None:
     register(task)
     for name in (*suites, "all"):
@@ -232,6 +273,10 @@ def register_builtin() -> None:
             _add(("revisit", *(("bev-revisit",) if source == "bev" else ())), _revisit(source, sequence))
     for sequence in BEVPLACE_RANGES:
         _add(("bev-bevplace",), _bevplace("bev", sequence))
+    for rotated, protocols in ROTATED_PROTOCOLS.items():
+        for protocol in protocols:
+            for sequence in REVISIT_SEQUENCES["bev"]:
+                _add(("bev-rotated",), _rotated(sequence, protocol, rotated))
     old: list[TaskSpec] = []  # superseded versions: registered, in no suite
     for version in SYNTH_DATA_VERSIONS:
         if version < TASK_VERSION["paper"]["synth"]:

@@ -2,7 +2,8 @@
 
 After `import safl_bench`, `gymnasium.make("SAFL/Synth00-T5R1.5-v4")` returns it (KITTI tasks
 take `kitti_root=...` as a make keyword, or $SAFL_KITTI_ROOT, and top-view image tasks `bev_root=...`
-or $SAFL_BEV_ROOT; `progress=False` silences the
+or $SAFL_BEV_ROOT, their rotated tasks also `bev_rot_root=...` or $SAFL_BEV_ROT_ROOT;
+`progress=False` silences the
 progress bars of a first run, which generates the synthetic data and renders the maps).
 
 - observation: the current query map, Box(0, 1, (H, W), float32).
@@ -55,13 +56,15 @@ class TaskEnv(gymnasium.Env):
         kitti_root: str | None = None,
         bev_root: str | None = None,
         progress: bool = True,
+        bev_rot_root: str | None = None,
     ) -> None:
         if task is None:
             if task_id is None:
                 raise ConfigError("TaskEnv needs a task id or a Task")
             from safl_bench.tasks.task import make
 
-            task = make(task_id, kitti_root=kitti_root, bev_root=bev_root, progress=progress)
+            task = make(task_id, kitti_root=kitti_root, bev_root=bev_root, progress=progress,
+                        bev_rot_root=bev_rot_root)
         self.task = task
         # private read-only copies: `info["database"]` is shared with the agent, not copied per reset
         self.database = np.array(task.database("topview"), dtype=np.float32)

@@ -34,6 +34,10 @@ SOURCES = ("synth", "kitti", "bev")
 #: stay those their records hold.
 FIRST_SYNTH_DATA_VERSION = "1"
 PROTOCOLS = ("paper", "revisit", "bevplace")
+#: Which views of a top-view task come from the second image folder of its sequence (BEVPlace's
+#: KITTIRot: each scan yawed by its own random angle before its image was made): the queries
+#: only, or the database and the queries (what BEVPlace's own main.py scores).
+ROTATED = ("queries", "both")
 
 #: Noise seeds a cell of a task with noisy queries averages, unless the task says otherwise: five
 #: draws bound the spread of a cell (issue #25: one seed of Stable-AFL's T1R1 on real 00 ranges
@@ -101,6 +105,10 @@ class TaskSpec:
         every cell). 0 (earlier versions): every query is scored.
     map_config: every setting of the top-view maps rendered from scans (None for an image source,
         whose views are its images).
+    rotated: source "bev" only: None (every view from the top-view images, `--bev-root`),
+        "queries" (the database from them, the queries from the second image folder of the same
+        sequence, `--bev-rot-root`: BEVPlace's KITTIRot) or "both" (database and queries from
+        the second folder, as BEVPlace's main.py scores). Same frames, poses and ground truth.
     """
 
     id: str
@@ -120,6 +128,7 @@ class TaskSpec:
     window_s: float | None = None
     data_version: str | None = None
     context_queries: int = 0
+    rotated: str | None = None
     description: str = ""
     namespace: str | None = field(init=False, repr=False, compare=False)
     name: str = field(init=False, repr=False, compare=False)
@@ -179,6 +188,9 @@ class TaskSpec:
             if self.map_config != MapConfig():
                 raise ConfigError(f"task {self.id}: an image source's views are its images; it takes no map_config")
             object.__setattr__(self, "map_config", None)
+        if self.rotated is not None and (self.source != "bev" or self.rotated not in ROTATED):
+            raise ConfigError(f"task {self.id}: rotated is one of {', '.join(ROTATED)} and belongs to "
+                              f"top-view image tasks (source bev) only, got {self.rotated!r} on {self.source}")
         if self.source != "bev" and self.map_config is None:
             raise ConfigError(f"task {self.id}: tasks on scans need a map_config")
         if self.protocol in ("paper", "bevplace"):
@@ -230,6 +242,8 @@ class TaskSpec:
             out["data_version"] = self.data_version  # likewise: v0's fingerprints stay as they were
         if self.context_queries:  # likewise: the definitions before it keep their fingerprints
             out["context_queries"] = self.context_queries
+        if self.rotated is not None:  # likewise
+            out["rotated"] = self.rotated
         return out
 
     @property

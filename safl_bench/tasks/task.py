@@ -43,7 +43,9 @@ class Task:
     `query_frames` (indices into the sequence: every `step`-th frame for both, or the spec's
     frame ranges), `database_positions` / `query_positions`
     (n, 2) m, `database_times` / `query_times` (n,) s, `query_offsets` (Nq, 3) the viewpoint
-    noise [dx, dy, dtheta] each query was rendered with, `truth` (`GroundTruth`).
+    noise [dx, dy, dtheta] each query was rendered with, `truth` (`GroundTruth`),
+    `query_source` (the source of the queries where it is not `source`: the second image folder
+    of a task whose queries are rotated, `TaskSpec.rotated`; None otherwise).
     """
 
     def __init__(
@@ -55,6 +57,7 @@ class Task:
         source: DataSource | None = None,
         progress: bool = True,
         headings: np.ndarray | None = None,
+        query_source: DataSource | None = None,
     ) -> None:
         positions = np.asarray(positions, dtype=np.float64)
         times = np.asarray(times, dtype=np.float64)
@@ -64,6 +67,7 @@ class Task:
             )
         self.spec = spec
         self.source = source
+        self.query_source = query_source
         self.progress = progress
         self.sequence_length = len(positions)
         self.database_frames = self._frames(spec.database_frames)
@@ -100,7 +104,9 @@ class Task:
 
     @property
     def shared_views(self) -> bool:
-        """Whether the queries are the database views themselves (same frames, clean)."""
+        """Whether the queries are the database views themselves (same frames, clean, same source)."""
+        if self.query_source is not None:
+            return False
         return self.spec.protocol == "revisit" or (
             self.spec.condition.is_clean and self.spec.query_frames is None)
 
@@ -114,15 +120,19 @@ class Task:
         bev_resolution_m: float | None = None,
         source: DataSource | None = None,
         progress: bool = True,
+        bev_rot_root: str | None = None,
     ) -> Task:
-        """Open the spec's data source and sequence (or `source`, of the same kind); a synthetic
-        task on other synthetic data than this safl-bench generates is a ConfigError."""
-        check_data_version(spec)
-        if source is None:
-            from safl_bench.sources import DEFAULT_RESOLUTION_M, open_source
+        """Open the spec's data source and sequence (or `source`, of the same kind), and the
+        second image folder of a task whose queries are rotated (`bev_rot_root`, else
+        $SAFL_BEV_ROT_ROOT); a synthetic task on other synthetic data than this safl-bench
+        generates is a ConfigError."""
+        from safl_bench.sources import DEFAULT_RESOLUTION_M, open_query_source, open_source
 
+        check_data_version(spec)
+        resolution = bev_resolution_m or DEFAULT_RESOLUTION_M
+        if source is None:
             source = open_source(spec, kitti_root=kitti_root, bev_root=bev_root, progress=progress,
-                                 bev_resolution_m=bev_resolution_m or DEFAULT_RESOLUTION_M)
+                                 bev_resolution_m=resolution, bev_rot_root=bev_rot_root)
         elif source.kind != spec.source:
             raise ConfigError(
                 f"task {spec.id} runs on {spec.source} data, got a {source.kind} source"
@@ -131,10 +141,14 @@ class Task:
             sequence = source.sequence(spec.sequence)
             positions, times = sequence.positions, sequence.times
             headings = getattr(sequence, "headings", None)
+            query_source = open_query_source(spec, source, bev_rot_root=bev_rot_root,
+                                             bev_resolution_m=resolution)
         except DataError as exc:
-            raise DataError(f"task {spec.id}: {exc}") from None
+            message = str(exc)
+            raise DataError(message if message.startswith(f"task {spec.id}") else
+                            f"task {spec.id}: {message}") from None
         return cls(spec, positions=positions, times=times, source=source, progress=progress,
-                   headings=headings)
+                   headings=headings, query_source=query_source)
 
     @classmethod
     def from_arrays(
@@ -209,6 +223,8 @@ class Task:
             return
         for kind in kinds:
             self.source.check_kind(kind)
+            if self.query_source is not None:  # an image folder: its views are never cached
+                self.query_source.check_kind(kind)
         mapcache.prepare(
             self.source,
             self.spec.sequence,
@@ -243,8 +259,9 @@ class Task:
             self.prepare([kind])  # database and queries in one pass over the scans
             condition = CLEAN if role == "database" else self.spec.condition
             frames = self.database_frames if role == "database" else self.query_frames
+            source = self.query_source if role == "queries" and self.query_source else self.source
             self._views[role, kind] = mapcache.load_views(
-                self.source,
+                source,
                 self.spec.sequence,
                 self.spec.map_config,
                 frames=frames,
@@ -264,6 +281,13 @@ class Task:
             out["data_label"] = self.source.label
             out["data_fingerprint"] = self.source.fingerprint(self.spec.sequence)
             notes = self.source.notes(self.spec.sequence)
+            if self.query_source is not None:  # both folders' files, and which views each gave
+                from safl_bench.common.fingerprint import fingerprint
+
+                out["data_fingerprint"] = fingerprint(
+                    out["data_fingerprint"], self.query_source.fingerprint(self.spec.sequence))
+                notes = [f"database {n}" for n in notes] + [
+                    f"queries {n}" for n in self.query_source.notes(self.spec.sequence)]
             if notes:
                 out["data_notes"] = notes
         return out
@@ -314,6 +338,7 @@ def make(
     bev_resolution_m: float | None = None,
     source: DataSource | None = None,
     progress: bool = True,
+    bev_rot_root: str | None = None,
 ) -> Task:
     """Materialise a task: open its data source and sequence, select frames, build ground truth.
 
@@ -321,9 +346,11 @@ def make(
     (`task.database(kind)`, `task.queries(kind)`, or all at once with `task.prepare(...)`).
     `source` overrides the source the spec names (it must be of the same kind); otherwise KITTI
     tasks take `kitti_root` or $SAFL_KITTI_ROOT, top-view image tasks `bev_root` or
-    $SAFL_BEV_ROOT (at `bev_resolution_m` metres per pixel, default 0.4) and synthetic tasks the
-    embedded default. A synthetic task on other synthetic data than this safl-bench generates
+    $SAFL_BEV_ROOT (at `bev_resolution_m` metres per pixel, default 0.4; their rotated tasks also
+    `bev_rot_root` or $SAFL_BEV_ROT_ROOT, `TaskSpec.rotated`) and synthetic tasks the embedded
+    default. A synthetic task on other synthetic data than this safl-bench generates
     raises ConfigError (`check_data_version`).
     """
     return Task.from_spec(runnable_spec(task_id), kitti_root=kitti_root, bev_root=bev_root,
-                          bev_resolution_m=bev_resolution_m, source=source, progress=progress)
+                          bev_resolution_m=bev_resolution_m, source=source, progress=progress,
+                          bev_rot_root=bev_rot_root)
