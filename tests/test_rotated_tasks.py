@@ -15,6 +15,8 @@ from conftest import write_bev
 from safl_bench import tasks
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import ConfigError, DataError
+from safl_bench.leaderboard.site import explain_command
+from safl_bench.results.records import load_record, rerun_command
 from safl_bench.sources import bev_source
 from safl_bench.tasks.builtin import REVISIT_SEQUENCES, rotated_id
 
@@ -129,11 +131,16 @@ def test_a_run_records_the_rotated_label_and_both_folders(roots, safl_home, tmp_
     code = cli_main(["run", "--method", "sad", "--quiet", "--results", str(results), "--bev-root",
                      str(plain), "--bev-rot-root", str(rot), "--task", QUERIES, "--task", BOTH])
     assert code == 0
-    labels = {}
+    labels, commands = {}, {}
     for path in results.rglob("seed-0.json"):
         record = json.loads(path.read_text())
         labels[record["task"]["id"]] = record["task"]["source_label"]
         assert record["task"]["spec"]["rotated"] in ("queries", "both")
+        loaded = load_record(path)
+        commands[loaded.task.id] = (rerun_command(loaded), explain_command(loaded, "r"))
+    assert commands[QUERIES][0].endswith(" --bev-root DIR --bev-rot-root DIR --force")
+    assert commands[BOTH][0].endswith(f"--task {BOTH} --seed 0 --bev-rot-root DIR --force")
+    assert commands[QUERIES][1].endswith(" --bev-root DIR --bev-rot-root DIR")
     assert labels == {QUERIES: "KITTI top-view images, rotated queries (KITTIRot)",
                       BOTH: "KITTI top-view images, rotated database and queries (KITTIRot)"}
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from safl_bench.cli.options import add_bev_arguments, seed
+from safl_bench.cli.options import add_bev_arguments, add_bev_rot_argument, seed
 
 HELP = (
     "Explain one cell (method, task, seed) from its result record: recompute its difference "
@@ -31,6 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="how many of the most confident wrong matches to show (default 4)")
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root (KITTI tasks)")
     add_bev_arguments(parser)
+    add_bev_rot_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -49,6 +50,7 @@ def main(args: argparse.Namespace) -> int:
         seed=args.seed,
         kitti_root=args.kitti_root,
         bev_root=args.bev_root,
+        bev_rot_root=args.bev_rot_root,
         bev_resolution_m=args.bev_resolution,
         progress=not args.quiet,
     )

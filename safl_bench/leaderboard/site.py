@@ -41,7 +41,7 @@ from safl_bench.leaderboard.intervals import BEST, TIED, without_intervals
 from safl_bench.leaderboard.report import BuildReport, PublishedTable, headline_rank
 from safl_bench.leaderboard.tables import RowKey, Table, ValueFormat, seeds_sentence
 from safl_bench.results.records import Problem, ResultRecord, record_path
-from safl_bench.sources import ROOT_OPTION
+from safl_bench.sources import root_options
 
 SITE_DIR = "site"
 INDEX = "index.html"
@@ -349,8 +349,9 @@ def explain_command(record: ResultRecord, records_folder: str) -> str:
                              record.task.source_kind)
     parts = ["safl-bench explain", f"--method {method}", f"--task {record.task.id}",
              f"--seed {record.seed}", f"--results {records_folder}"]
-    if record.task.source_kind in ROOT_OPTION:
-        parts.append(ROOT_OPTION[record.task.source_kind])
+    roots = root_options(record.task.source_kind, record.task.spec.get("rotated"))
+    if roots:
+        parts.append(roots)
     return " ".join(parts)
 
 

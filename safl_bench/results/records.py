@@ -471,9 +471,9 @@ def seed_outcomes(records: Sequence[ResultRecord], mode: str) -> list[Outcomes] 
 
 def rerun_command(record: ResultRecord) -> str:
     """The command that recomputes `record` with this code."""
-    from safl_bench.sources import ROOT_OPTION
+    from safl_bench.sources import root_options
 
-    root = ROOT_OPTION.get(record.task.source_kind)
+    root = root_options(record.task.source_kind, record.task.spec.get("rotated"))
     return (f"safl-bench run --method {record.method.name}@{record.method.version} "
             f"--task {record.task.id} --seed {record.seed}{f' {root}' if root else ''} --force")
 

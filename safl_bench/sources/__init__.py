@@ -55,8 +55,18 @@ ROT_ROOT_OPTION = "--bev-rot-root DIR"
 __all__ = [
     "BEV_ROOT_ENV", "BEV_ROT_ROOT_ENV", "DEFAULT_RESOLUTION_M", "KINDS", "ROT_ROOT_OPTION",
     "BevSource", "DataSource", "KittiSource", "SynthSource", "bev_source", "kitti_source",
-    "open_query_source", "open_source", "real_roots", "resolve_source", "synth_source",
+    "open_query_source", "open_source", "real_roots", "resolve_source", "root_options",
+    "synth_source",
 ]
+
+
+def root_options(kind: str, rotated: str | None = None) -> str:
+    """The data options a task on `kind` data needs, its image folders by `TaskSpec.rotated`
+    (e.g. '--bev-root DIR --bev-rot-root DIR'); '' for the synthetic default."""
+    if rotated == "both":
+        return ROT_ROOT_OPTION
+    plain = ROOT_OPTION.get(kind, "")
+    return f"{plain} {ROT_ROOT_OPTION}" if rotated == "queries" else plain
 
 
 def real_roots(kitti_root: str | os.PathLike[str] | None,
