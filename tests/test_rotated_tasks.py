@@ -166,3 +166,28 @@ def test_the_builtin_rotated_tasks_copy_the_plain_ones() -> None:
                 assert task.id not in tasks.suite("bev-bevplace") + tasks.suite("bev-revisit")
     assert tasks.spec("SAFL/BEVKITTIRot02-BEVPlace-v1").context_queries == 10
     assert len(tasks.suite("bev-rotated")) == 12
+
+
+def test_the_leaderboard_tables_each_reading_of_the_images_apart(tmp_path) -> None:
+    from record_factory import make_record
+
+    from safl_bench.leaderboard import build_leaderboard
+    from safl_bench.leaderboard.guides import bevplace_reproduction
+    from safl_bench.sources.bev import BEV_LABEL, ROTATED_LABELS
+
+    records = [make_record(method, protocol="bevplace", condition=None, sequence=s, source_kind="bev",
+                           task_version=1, source_label=label, recall_at_1=r)
+               for label, r in ((ROTATED_LABELS["both"], 0.5), (BEV_LABEL, 0.9),
+                                (ROTATED_LABELS["queries"], 0.3))
+               for s in ("00", "05") for method in ("bevplace", "sad")]
+    report = build_leaderboard(records, tmp_path / "lb", figures=False)
+    index = (tmp_path / "lb" / "index.md").read_text()
+    for label in (BEV_LABEL, *ROTATED_LABELS.values()):
+        assert f"## {label}\n" in index
+    block = bevplace_reproduction(report)
+    assert block is not None
+    readings = block.split("\n\n**")
+    assert len(readings) == 3 and readings[0].startswith(f"**{BEV_LABEL}**: BEVPlace's protocol")
+    assert [r.split("**")[0] for r in readings[1:]] == sorted(ROTATED_LABELS.values())
+    for reading in readings:  # each beside the published figures, 05's too
+        assert "| BEVPlace (published) | — | 99.7 | — | 99.3 | — |" in reading

@@ -220,7 +220,27 @@ BEVPLACE_LABEL = "Recall@1/5/10, F1max"
 def bevplace_reproduction(report: BuildReport) -> str | None:
     """BEVPlace's protocol, newest task version on real KITTI top views: Recall@1 per method,
     version and sequence, single frame (with the count of queries it matched, of those with a
-    true place) and with the sequence matcher, beside BEVPlace's published values."""
+    true place) and with the sequence matcher, beside BEVPlace's published values; one table per
+    reading of the images that has records (the plain images first, then the rotated ones,
+    `safl_bench.sources.bev.ROTATED_LABELS`), so that which images give the published figures
+    can be read off."""
+    found = [t for t in report.tables if t.key.source_kind == "bev" and t.key.protocol == "bevplace"
+             and t.label == BEVPLACE_LABEL]
+    if not found:
+        return None
+    newest: dict[str, PublishedTable] = {}
+    for t in found:
+        if t.key.source_label not in newest or t.key.task_version > newest[t.key.source_label].key.task_version:
+            newest[t.key.source_label] = t
+    from safl_bench.sources.bev import BEV_LABEL
+
+    parts = [_bevplace_reading(newest[label], several=len(newest) > 1)
+             for label in sorted(newest, key=lambda label: (label != BEV_LABEL, label))]
+    return "\n\n".join(parts)
+
+
+def _bevplace_reading(published: PublishedTable, several: bool) -> str:
+    """`bevplace_reproduction`'s table for one reading of the images (one source label)."""
     from safl_bench.leaderboard.tables import (
         PUBLISHED_BEVPLACE,
         PUBLISHED_SEQUENCES,
@@ -229,11 +249,6 @@ def bevplace_reproduction(report: BuildReport) -> str | None:
     )
     from safl_bench.methods.training_data import record_seen, record_untrained
 
-    found = [t for t in report.tables if t.key.source_kind == "bev" and t.key.protocol == "bevplace"
-             and t.label == BEVPLACE_LABEL]
-    if not found:
-        return None
-    published = max(found, key=lambda t: t.key.task_version)
     table = published.table
     sequences = sorted({r.task.sequence for r in published.records})
     by: dict[tuple[str, str, str], list[ResultRecord]] = {}
@@ -270,8 +285,9 @@ def bevplace_reproduction(report: BuildReport) -> str | None:
                 cells.append(f"{text} ({correct} of {positives})" if mode == "single_frame" else text)
         lines.append(f"| {name} | {version} | " + " | ".join(cells) + " |")
     over = f"seed {seeds[0]}" if len(seeds) == 1 else f"seeds {', '.join(map(str, seeds))} pooled"
+    images = f"**{published.key.source_label}**: " if several else ""
     return "\n".join([
-        f"BEVPlace's protocol, task version v{published.key.task_version}, Recall@1 (%) over the "
+        f"{images}BEVPlace's protocol, task version v{published.key.task_version}, Recall@1 (%) over the "
         f"scored queries with a true place, {over}: single frame (the nearest database frame; in "
         "brackets the queries it matched within the true-place radius, of those with a true place) "
         "and with the paper's sequence matcher; BEVPlace's published values (Luo et al., ICCV 2023, "
