@@ -39,7 +39,7 @@ from safl_bench.evaluation.metrics import (
     outcomes,
     true_place_ranks,
 )
-from safl_bench.matching.matcher import MatchResult, match
+from safl_bench.matching.matcher import MatcherConfig, MatchResult, match
 from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they were defined here)
     DISTANCES,
     EVALUATION_SETTINGS,
@@ -50,6 +50,7 @@ from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they wer
 )
 from safl_bench.methods.distance import euclidean
 from safl_bench.methods.method import Method
+from safl_bench.methods.retrieval import Retrieval, is_retrieval
 
 
 @dataclass
@@ -63,10 +64,13 @@ class Evaluation:
     describe_s: float  # both sides, all frames, in the method's own batching
     n_described: int
     matcher_s: float  # the sequence matcher on the difference matrix
+    #: retrieval methods: the method's own seconds per query (`Retrieval.seconds`); else None
+    query_s: np.ndarray | None = None
 
 
 def match_outcomes(truth: GroundTruth, result: MatchResult,
-                   ranks: np.ndarray | None = None) -> Outcomes:
+                   ranks: np.ndarray | None = None,
+                   relative_pose: np.ndarray | None = None) -> Outcomes:
     """The label layer: each query's reported match labelled against the task's ground truth
     (`safl_bench.evaluation.metrics` defines what each label counts as). A match in the band between the
     true- and false-positive radii is ambiguous; a match to a frame the query may not match is
@@ -78,7 +82,8 @@ def match_outcomes(truth: GroundTruth, result: MatchResult,
     labels[answered] = truth.label_of(answered, result.index[answered])
     return outcomes(result.confidence, claimed & (labels == TP), truth.has_loop,
                     ambiguous=claimed & (labels == EXCLUDED), has_candidate=truth.has_candidate,
-                    true_rank=ranks, match=np.where(claimed, result.index, -1))
+                    true_rank=ranks, match=np.where(claimed, result.index, -1),
+                    relative_pose=relative_pose)
 
 
 def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:
@@ -178,6 +183,9 @@ def evaluate_method(
     if cfg.max_frames is not None:
         queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
         truth = subset_truth(truth, slice(0, cfg.max_frames), slice(0, cfg.max_frames))
+    if is_retrieval(method):
+        return evaluate_retrieval(method, queries, database, truth, config=cfg, revisit=revisit,
+                                  context=context)
     D, describe_s, n = difference_matrix(method, queries, database, cfg.distance, memo)
     limit = truth.db_limit() if revisit else None
     matches: dict[str, MatchResult] = {}
@@ -196,6 +204,79 @@ def evaluate_method(
                  for mode in MODES}
     metrics = {mode: evaluate_outcomes(per_query[mode], recall_at=RECALL_AT) for mode in MODES}
     return Evaluation(matches, per_query, metrics, describe_s, n, seconds["sequence"])
+
+
+def evaluate_retrieval(
+    method: Method,
+    queries: Any,
+    database: Any,
+    truth: GroundTruth,
+    *,
+    config: EvaluationConfig,
+    revisit: bool = False,
+    context: int = 0,
+) -> Evaluation:
+    """A retrieval method (`safl_bench.methods.retrieval`) on one task's views: its ranked
+    candidates, restricted to each query's candidates (`GroundTruth.db_limit` on revisit tasks:
+    what it returns beyond them is dropped), become a difference matrix (minus the confidence,
+    +inf where not returned), which the single-frame matcher and `true_place_ranks` read with
+    the one tie rule; only the single-frame mode is scored (no sequence result: no full
+    difference matrix). The matched frame's relative pose, where the method gives one, goes to
+    the outcomes. Revisit queries are the database frames, so the method is told
+    ``same_frames``."""
+    cfg = config
+    limit = truth.db_limit() if revisit else None
+    progress.expect(len(queries))
+    t0 = time.perf_counter()
+    answer = method.retrieve(queries, database, db_limit=limit, same_frames=revisit)
+    if not isinstance(answer, Retrieval):
+        raise DataError(f"method {method.name!r}: retrieve() must return a Retrieval, got "
+                        f"{type(answer).__name__}")
+    answer = answer.checked(len(queries), len(database), f"method {method.name!r}")
+    seconds = time.perf_counter() - t0
+    progress.advance(len(queries))
+    D = answer.as_difference(len(database), limit)
+    t0 = time.perf_counter()
+    result = top_candidate(D, cfg.single_frame)
+    matcher_s = time.perf_counter() - t0
+    scored = scored_queries(len(D), cfg.trim_queries, context)
+    part = subset_truth(truth, scored, slice(None)) if scored != slice(0, len(D)) else truth
+    ranks = true_place_ranks(D[scored], [part.true_matches(i) for i in range(part.n_queries)],
+                             db_limit=None if limit is None else limit[scored],
+                             dtype=cfg.single_frame.dtype)
+    pose = None
+    if answer.pose is not None:
+        pose = np.stack([answer.pose_of(i, int(j)) for i, j in enumerate(result.index)])[scored]
+    outcome = match_outcomes(part, subset_result(result, scored), ranks, pose)
+    mode = "single_frame"
+    return Evaluation({mode: result}, {mode: outcome},
+                      {mode: evaluate_outcomes(outcome, recall_at=RECALL_AT)},
+                      seconds, len(queries), matcher_s,
+                      query_s=None if answer.seconds is None else np.asarray(answer.seconds))
+
+
+def top_candidate(D: np.ndarray, config: MatcherConfig) -> MatchResult:
+    """The single-frame answer of a retrieval method from its ranking `D` (`Retrieval.
+    as_difference`: lower = better, +inf = not returned or not allowed): per query the first
+    minimum in the matcher's precision (`config.dtype`), i.e. the highest confidence and, among
+    equal ones, the lower database index (the one tie rule); no match (-1, +inf) when nothing
+    was returned. Its score is minus the method's confidence, so the metrics read that
+    confidence (`confidence_from_score`). No contrast enhancement nor score rule applies: the
+    method's own confidence is the score."""
+    Dm = np.asarray(D, dtype=np.dtype(config.dtype))
+    n = Dm.shape[0]
+    if Dm.shape[1] == 0:
+        j = np.zeros(n, np.int64)
+        best = np.full(n, np.inf)
+    else:
+        j = np.argmin(Dm, axis=1).astype(np.int64)
+        best = Dm[np.arange(n), j].astype(np.float64)
+    found = np.isfinite(best)
+    index = np.where(found, j, -1)
+    score = np.where(found, best, np.inf)
+    return MatchResult(index=index, score=score, best_s=score.copy(),
+                       velocity=np.full(n, np.nan), n_terms=found.astype(np.int64),
+                       complete=found.copy(), config=config)
 
 
 def scored_queries(n_queries: int, trim: int, context: int = 0) -> slice:

@@ -140,6 +140,11 @@ class Outcomes:
     #: int64, the database frame each query matched (-1 = no match reported); read by the
     #: loop-closure stage (`safl_bench.slam`), never by a measure; None in older records
     match: np.ndarray | None = None
+    #: float64 (n, 3): the method's own estimate of the pose of its matched database frame in
+    #: the query's frame, [x m, y m, yaw rad] (T_query^-1 T_match in SE(2)); a row of NaN where
+    #: it gives none or reported no match; None (the whole field) for methods that estimate no
+    #: pose (every descriptor method). Read by `safl_bench.slam`, never by a measure.
+    relative_pose: np.ndarray | None = None
 
 
 @dataclass
@@ -216,11 +221,13 @@ def outcomes(
     has_candidate: Any = None,
     true_rank: Any = None,
     match: Any = None,
+    relative_pose: Any = None,
 ) -> Outcomes:
     """Validated `Outcomes` from per-query arrays: `is_correct` (the reported match is a true
     place), `ambiguous` (it lies in the band: neither correct nor wrong; None = none does),
     `has_candidate` (None = every query has one), `true_rank` (optional), `match` (optional:
-    the matched database frame, -1 = none)."""
+    the matched database frame, -1 = none), `relative_pose` (optional: (n, 3) [x, y, yaw] of
+    the matched frame in the query's frame, NaN rows = none)."""
     conf = _confidence(confidence)
     n = conf.shape[0]
     correct = _bool_array(is_correct, "is_correct", n)
@@ -251,8 +258,15 @@ def outcomes(
             raise DataError(f"match must be integers >= -1 of shape ({n},), got "
                             f"{matched.dtype} {matched.shape}")
         matched = matched.astype(np.int64)
+    pose = None
+    if relative_pose is not None:
+        pose = np.asarray(relative_pose, dtype=np.float64)
+        if pose.shape != (n, 3):
+            raise DataError(f"relative_pose must have shape ({n}, 3), got {pose.shape}")
+        if np.isinf(pose).any() or (np.isnan(pose).any(axis=1) != np.isnan(pose).all(axis=1)).any():
+            raise DataError("relative_pose rows must be finite [x, y, yaw] or all NaN (none)")
     return Outcomes(confidence=conf, label=label, has_true_place=has_true, has_candidate=cand,
-                    true_rank=rank, match=matched)
+                    true_rank=rank, match=matched, relative_pose=pose)
 
 
 def evaluate(

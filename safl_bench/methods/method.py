@@ -14,6 +14,8 @@ Class attributes say what the harness must know without running anything:
   maps in [0, 1]; "points": a list of (M_i, 3) float32 arrays, the local-map points in each
   viewpoint's frame, inside the top view's window (the same part of the map the top view shows). The harness asks the map cache for `method.input_kind` and hands the result
   to `fit`/`describe` unchanged; nothing is special-cased per method.
+* `kind`: "descriptor" (this contract) or "retrieval" (`retrieve` answers each query with
+  ranked, verified candidates instead: `safl_bench.methods.retrieval`).
 
 `get_params()`/`set_params()` follow scikit-learn (read from the constructor's signature, so
 every constructor argument must be stored as an attribute of the same name). `config()` is the
@@ -71,6 +73,10 @@ from safl_bench.errors import ConfigError, DataError, RegistryError
 from safl_bench.methods.distance import sqeuclidean
 
 INPUT_KINDS: tuple[str, ...] = ("topview", "points")
+
+#: "descriptor": describe + distance (this module); "retrieval": ranked, verified candidates
+#: per query (`safl_bench.methods.retrieval`).
+METHOD_KINDS: tuple[str, ...] = ("descriptor", "retrieval")
 
 Views = np.ndarray | Sequence[np.ndarray]
 
@@ -137,6 +143,8 @@ class Method:
     name: ClassVar[str] = ""
     version: ClassVar[str] = ""
     input_kind: ClassVar[str] = "topview"
+    #: "descriptor" (this contract) or "retrieval" (`safl_bench.methods.retrieval.RetrievalMethod`)
+    kind: ClassVar[str] = "descriptor"
     #: True for methods whose `fit` learns something (they also implement the state hooks).
     trainable: ClassVar[bool] = False
     #: Constructor parameters that do not change the outputs (e.g. a batch size for inference);
@@ -296,7 +304,7 @@ class Method:
 ENTRY_POINT_GROUP = "safl_bench.methods"
 BUILTIN_MODULES: tuple[str, ...] = (
     "baselines.sad", "baselines.bigan", "baselines.bigan_v2", "methods.stable_afl", "methods.stable_afl_v2",
-    "baselines.scan_context", "baselines.m2dp", "baselines.bevplace",
+    "baselines.scan_context", "baselines.m2dp", "baselines.bevplace", "baselines.map_closures",
 )
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_.\-]*$")
 
@@ -367,6 +375,8 @@ def _validate_class(cls: Any, where: str) -> type[Method]:
         raise RegistryError(f"{where}: {cls.__name__}.version must be a non-empty string")
     if cls.input_kind not in INPUT_KINDS:
         raise RegistryError(f"{where}: {cls.__name__}.input_kind must be one of {INPUT_KINDS}, got {cls.input_kind!r}")
+    if cls.kind not in METHOD_KINDS:
+        raise RegistryError(f"{where}: {cls.__name__}.kind must be one of {METHOD_KINDS}, got {cls.kind!r}")
     return cls
 
 

@@ -105,6 +105,8 @@ def _one_length(queries: QueryOutcomes) -> QueryOutcomes:
         lengths.add(len(queries.true_rank))
     if queries.match is not None:
         lengths.add(len(queries.match))
+    if queries.relative_pose is not None:
+        lengths.add(len(queries.relative_pose))
     if len(lengths) != 1:
         raise ValueError("its per-query lists differ in length")
     return queries
@@ -155,6 +157,9 @@ class MethodInfo:
     name: Name
     version: Name
     params: dict[str, Any] = field(default_factory=dict)
+    #: "descriptor" (describe + distance) or "retrieval" (ranked, verified candidates: no
+    #: difference matrix, so no sequence-matcher result; `safl_bench.methods.retrieval`)
+    kind: Literal["descriptor", "retrieval"] = "descriptor"
 
 
 @dataclass(frozen=True)
@@ -213,7 +218,9 @@ class QueryOutcomes:
     reported; label: 1 correct, 0 ambiguous, -1 wrong; has_true_place, has_candidate: 0 or 1;
     true_rank: rank of the nearest true place (0 = none), single-frame mode only; match: the
     database frame each query matched (-1 = none; what the loop-closure stage, `safl_bench.slam`,
-    reads), absent from records made before it was stored."""
+    reads), absent from records made before it was stored; relative_pose: the method's own
+    estimate of its matched frame's pose in the query's frame, [x m, y m, yaw rad] (T_query^-1
+    T_match in SE(2)), null where it gives none; absent for methods that estimate no pose."""
 
     __pydantic_config__: ClassVar[ConfigDict] = RECORD_CONFIG
 
@@ -223,6 +230,7 @@ class QueryOutcomes:
     has_candidate: list[Annotated[int, Strict(), Field(ge=0, le=1)]]
     true_rank: list[Count] | None = None
     match: list[Annotated[int, Strict(), Field(ge=-1)]] | None = None
+    relative_pose: list[Annotated[list[Number], Field(min_length=3, max_length=3)] | None] | None = None
 
     @classmethod
     def of(cls, o: Outcomes) -> QueryOutcomes:
@@ -233,6 +241,9 @@ class QueryOutcomes:
             has_candidate=[int(v) for v in o.has_candidate.tolist()],
             true_rank=None if o.true_rank is None else [int(v) for v in o.true_rank.tolist()],
             match=None if o.match is None else [int(v) for v in o.match.tolist()],
+            relative_pose=None if o.relative_pose is None else [
+                None if math.isnan(row[0]) else [float(v) for v in row]
+                for row in o.relative_pose.tolist()],
         )
 
     def outcomes(self) -> Outcomes:
@@ -244,6 +255,9 @@ class QueryOutcomes:
             has_candidate=np.array(self.has_candidate, dtype=bool),
             true_rank=None if self.true_rank is None else np.array(self.true_rank, np.int64),
             match=None if self.match is None else np.array(self.match, np.int64),
+            relative_pose=None if self.relative_pose is None else np.array(
+                [[math.nan] * 3 if p is None else p for p in self.relative_pose], np.float64
+            ).reshape(-1, 3),
         )
 
 
@@ -740,6 +754,9 @@ class EvaluatedCell:
     matcher_s: Amount
     evaluated_on: Name  # "this process", "2 local worker processes", "Ray cluster (auto)"
     metrics_version: MetricsVersion = METRICS_VERSION
+    #: retrieval methods: the median ms of the method's own call per query, measured while
+    #: evaluating (their timing: `safl_bench.methods.retrieval`); None for descriptor methods
+    query_ms: Amount | None = None
 
 
 def evaluated_path(

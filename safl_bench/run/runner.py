@@ -51,6 +51,7 @@ from safl_bench.evaluation.cell import DatabaseMemo, evaluate_method
 from safl_bench.evaluation.metrics import METRICS_VERSION, NoPositivesError
 from safl_bench.matching.settings import MODES, EvaluationConfig, same_settings
 from safl_bench.methods.method import Method, input_note, method_input, method_selector
+from safl_bench.methods.retrieval import NO_SEQUENCE, NO_SEQUENCE_WHY, is_retrieval
 from safl_bench.results.records import (
     CorruptRecordError,
     EvaluatedCell,
@@ -131,7 +132,19 @@ def method_info(method: Method) -> MethodInfo:
     """The method part of a record: name, version and the full configuration (weights too)."""
     config = method.config()
     params = {k: v for k, v in config.items() if k not in ("name", "version")}
-    return MethodInfo(name=method.name, version=str(method.version), params=params)
+    return MethodInfo(name=method.name, version=str(method.version), params=params,
+                      kind="retrieval" if is_retrieval(method) else "descriptor")
+
+
+def view_kind(method: Method, task: Task) -> str:
+    """The views `method` reads on `task`: its `input_kind`, or top views on a source that has
+    none of those when the method says it reads them too (``reads_topview``, e.g. MapClosures
+    through its density-image adapter)."""
+    kinds = task.source.view_kinds if task.source is not None else None
+    if (kinds is not None and method.input_kind not in kinds and "topview" in kinds
+            and getattr(method, "reads_topview", False)):
+        return "topview"
+    return method.input_kind
 
 
 def _same_run(method: MethodInfo, task: TaskInfo, matcher: dict[str, Any], want_method: MethodInfo,
@@ -260,7 +273,7 @@ def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunO
 
 def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOptions,
               where: str, memo: DatabaseMemo | None = None) -> EvaluatedCell:
-    kind = method.input_kind
+    kind = view_kind(method, task)
     task.prepare([kind])
     queries, database = task.queries(kind), task.database(kind)
     try:
@@ -290,11 +303,13 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
         seed=task.spec.seed,
         matcher=options.evaluation.to_dict(),
         results={m: mode_result_from_evaluation(evaluation.metrics[m], evaluation.outcomes[m])
-                 for m in MODES},
+                 for m in MODES if m in evaluation.metrics},
         describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
         matcher_s=evaluation.matcher_s,
         evaluated_on=where,
         metrics_version=METRICS_VERSION,
+        query_ms=None if evaluation.query_s is None else float(
+            np.median(evaluation.query_s) * 1e3) if len(evaluation.query_s) else 0.0,
     )
 
 
@@ -318,6 +333,14 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
             first, describe_frames_per_s=cell.describe_frames_per_s, matcher_s=cell.matcher_s,
             how_run=f"{first.how_run}; the cell's timing (describe_ms_per_frame, "
                     f"peak_memory_mb), measured at seed {at}"))
+    if cell.query_ms is not None:  # a retrieval method: timed per query while it answered
+        return _write(options, cell, Timings(
+            describe_ms_per_frame=cell.query_ms, describe_frames_per_s=cell.describe_frames_per_s,
+            matcher_s=cell.matcher_s, peak_memory_mb=None, repeats=1,
+            how_run=("retrieval method: describe_ms_per_frame is the median over the queries of "
+                     "the method's own call per query (everything it does for one query), "
+                     f"measured while evaluating on {cell.evaluated_on}; describe_frames_per_s: "
+                     "queries per second of the whole retrieve call")))
     if task is None:
         task = _task(spec(cell.task.id), cell.seed, options, progress=False, method=method)
     queries = method_input(method, task.queries(method.input_kind))
@@ -633,8 +656,9 @@ def _prepare_views(
         opened = tasks[i].source
         if share and opened is not None:
             sources.setdefault(key, opened)
-    for kind in dict.fromkeys(cells[i][0].input_kind for i in tasks):
-        members = [i for i in tasks if cells[i][0].input_kind == kind]
+    kinds = {i: view_kind(cells[i][0], tasks[i]) for i in tasks}
+    for kind in dict.fromkeys(kinds.values()):
+        members = [i for i in tasks if kinds[i] == kind]
         problems = prepare_tasks([tasks[i] for i in members], (kind,), parallel=parallel,
                                  progress=progress)
         for j, message in problems.items():
@@ -687,6 +711,10 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         first = records[0]
         shown: dict[str, dict[str, str]] = {}
         for mode in ("sequence", "single_frame"):
+            if mode not in first.results:  # a retrieval method: no difference matrix
+                shown[mode] = dict.fromkeys(("recall_at_100_precision", "f1_max", "recall_at_1",
+                                             "auc"), NO_SEQUENCE)
+                continue
             per_seed = seed_outcomes(records, mode)
             if per_seed is None:  # records of metrics version 1: their means only
                 no_interval = True
@@ -731,6 +759,8 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
               f"{METRICS_VERSION}; recall over correct matches is in the records); ms/frame: "
               "describing one map at batch 1, median of the cell's distinct timings [their range]; "
               "'(1 timing)': the cell was timed once, at its first seed")
+    if any(NO_SEQUENCE in row for row in rows):
+        legend += f"; {NO_SEQUENCE}: {NO_SEQUENCE_WHY}; its ms/frame is the method's call per query"
     extra = ["note: some records hold no per-query outcomes (metrics version 1): their cells show "
              "the mean only; `safl-bench run --force` recomputes them"] if no_interval else []
     if any_seen:
@@ -769,6 +799,7 @@ def zeros_note(outcomes: Sequence[CellOutcome]) -> str:
     correct (Recall@1 >= 50 %): one confident false positive is enough for the zero, and
     `safl-bench explain` shows which. '' when there is no such cell."""
     cells = [o for o in outcomes if o.record is not None
+             and "sequence" in o.record.results
              and o.record.results["sequence"].metrics.recall_at_100_precision == 0.0
              and (o.record.results["sequence"].metrics.recall_at_1 or 0.0) >= 0.5]
     if not cells:
