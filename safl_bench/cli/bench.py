@@ -14,6 +14,8 @@
                                                  bigan@1 on real 00), interval overhead
   safl-bench bench main-job [--method NAME]       the README's main job from an empty cache and
                                                  cached, wall time and load average
+  safl-bench bench retrieval [--method map_closures] [--task ID]   a retrieval method's own
+                                                 calls against the harness's whole cell
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -31,7 +33,7 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job", "retrieval"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time, NAME or NAME@VERSION (repeatable; default: every registered "
                         "version; seeds: stable_afl@1, bigan@1)")
     parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v5; "
@@ -92,6 +94,17 @@ def main(args: argparse.Namespace) -> int:
         return _bevplace(args)
     if args.what == "seeds":
         return _seeds(args)
+    if args.what == "retrieval":
+        from safl_bench.bench import retrieval_bench
+
+        figures = retrieval_bench.run(
+            args.method[0] if args.method else retrieval_bench.DEFAULT_METHOD,
+            args.task or retrieval_bench.DEFAULT_TASK, kitti_root=args.kitti_root,
+            bev_root=args.bev_root or os.environ.get("SAFL_BEV_ROOT"), repeats=args.repeats)
+        print(retrieval_bench.format_results(figures))
+        if args.json:
+            atomic_write_json(args.json, figures)
+        return 0
     if args.what == "main-job":
         from safl_bench.bench import main_job_bench
 

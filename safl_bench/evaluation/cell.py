@@ -24,7 +24,7 @@ import dataclasses
 import hashlib
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -50,7 +50,7 @@ from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they wer
 )
 from safl_bench.methods.distance import euclidean
 from safl_bench.methods.method import Method
-from safl_bench.methods.retrieval import Retrieval, is_retrieval
+from safl_bench.methods.retrieval import Retrieval, RetrievalMethod, is_retrieval
 
 
 @dataclass
@@ -64,7 +64,8 @@ class Evaluation:
     describe_s: float  # both sides, all frames, in the method's own batching
     n_described: int
     matcher_s: float  # the sequence matcher on the difference matrix
-    #: retrieval methods: the method's own seconds per query (`Retrieval.seconds`); else None
+    #: retrieval methods: the method's own seconds per query (`Retrieval.seconds`; a method that
+    #: does not time its queries: its whole call's time spread evenly); None for descriptor ones
     query_s: np.ndarray | None = None
 
 
@@ -228,7 +229,8 @@ def evaluate_retrieval(
     limit = truth.db_limit() if revisit else None
     progress.expect(len(queries))
     t0 = time.perf_counter()
-    answer = method.retrieve(queries, database, db_limit=limit, same_frames=revisit)
+    answer = cast(RetrievalMethod, method).retrieve(queries, database, db_limit=limit,
+                                                    same_frames=revisit)
     if not isinstance(answer, Retrieval):
         raise DataError(f"method {method.name!r}: retrieve() must return a Retrieval, got "
                         f"{type(answer).__name__}")
@@ -252,7 +254,8 @@ def evaluate_retrieval(
     return Evaluation({mode: result}, {mode: outcome},
                       {mode: evaluate_outcomes(outcome, recall_at=RECALL_AT)},
                       seconds, len(queries), matcher_s,
-                      query_s=None if answer.seconds is None else np.asarray(answer.seconds))
+                      query_s=np.full(len(queries), seconds / max(len(queries), 1))
+                      if answer.seconds is None else np.asarray(answer.seconds, np.float64))
 
 
 def top_candidate(D: np.ndarray, config: MatcherConfig) -> MatchResult:

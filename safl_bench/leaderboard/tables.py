@@ -323,6 +323,11 @@ def _build(
             if have and set(have) != seeds:
                 own[(row, tuple(sorted(have)))].append(column)
     all_notes = list(notes)
+    retrieval = sorted({f"{r.method.name}@{r.method.version}" for r in records
+                        if r.method.kind == "retrieval"})
+    if retrieval and any(mode == "sequence" for mode, _ in probe.values()):
+        all_notes.append(f"{', '.join(retrieval)}: sequence matcher n/a (a retrieval method gives "
+                         "ranked candidates, no difference matrix): single-frame rows only.")
     for (row, theirs), cols in sorted(own.items(), key=lambda kv: (_row_sort_key(kv[0][0]), kv[0][1])):
         label = " ".join(
             part for part in (row[0], f"v{row[1]}", MODE_LABELS.get(row[2], row[2])) if part

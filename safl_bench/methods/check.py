@@ -1,4 +1,4 @@
-"""`check_method`: the conformance checks a descriptor method must pass.
+"""`check_method`: the conformance checks a method must pass (descriptor or retrieval kind).
 
 Meant for plug-in authors' own test suites as much as for ours::
 
@@ -6,6 +6,12 @@ Meant for plug-in authors' own test suites as much as for ours::
 
     def test_my_method_conforms():
         check_method(MyMethod(small_config=True))
+
+A retrieval method (`safl_bench.methods.retrieval`) gets `RETRIEVAL_CHECKS` instead of the
+describe/distance ones: `retrieve` returns a well-formed `Retrieval`, leaves its input alone,
+answers every query, gives each view back as its own best candidate when the database holds it
+(self-retrieval), returns only earlier frames when told the queries are the database frames
+(``same_frames``), and answers the same twice (unless it declares ``deterministic = False``).
 
 Every failed check raises `MethodCheckError` (an `AssertionError` and a `SaflError`) whose
 message starts with the check's name, e.g. ``[describe-dtype] ...``.
@@ -35,6 +41,17 @@ CHECKS: tuple[str, ...] = (
     "distance-finite",
     "distance-nonnegative",
     "self-distance-minimal",
+)
+
+RETRIEVAL_CHECKS: tuple[str, ...] = (
+    "attributes",
+    "params",
+    "fit-returns-self",
+    "retrieve-shape",
+    "input-unchanged",
+    "self-retrieval",
+    "same-frames-earlier",
+    "determinism",
 )
 
 
@@ -131,6 +148,8 @@ def check_method(
 
     if views is None:
         views = sample_views(method.input_kind)
+    if getattr(method, "kind", "descriptor") == "retrieval":
+        return _check_retrieval(method, views, label, fit)
     n = len(views)
     if n < 4:
         _fail("describe-shape", f"{label}: need at least 4 sample views, got {n}")
@@ -187,4 +206,53 @@ def check_method(
     if (own > dist.min(axis=1) + 1e-5 * dscale).any():
         _fail("self-distance-minimal", f"{label}: a view is not closest to itself (distance to itself "
               f"{own.max():g} exceeds the row minimum)")
+    return method
+
+
+def _check_retrieval(method: Method, views: Any, label: str, fit: bool) -> Method:
+    """`RETRIEVAL_CHECKS` after attributes and params (module docstring)."""
+    from safl_bench.methods.retrieval import Retrieval
+
+    n = len(views)
+    if n < 4:
+        _fail("retrieve-shape", f"{label}: need at least 4 sample views, got {n}")
+    original = _copy(views)
+    if fit:
+        result = method.fit(views)
+        if result is not method:
+            _fail("fit-returns-self", f"{label}: fit() must return self, returned {type(result).__name__}")
+    retrieve = method.retrieve  # type: ignore[attr-defined]
+
+    def answer(queries: Any, database: Any, **kw: Any) -> Retrieval:
+        out = retrieve(queries, database, **kw)
+        if not isinstance(out, Retrieval):
+            _fail("retrieve-shape", f"{label}: retrieve() must return a Retrieval, got {type(out).__name__}")
+        try:
+            return out.checked(len(queries), len(database), label)
+        except SaflError as exc:
+            _fail("retrieve-shape", str(exc))
+        raise AssertionError  # unreachable
+
+    first = answer(views, views)
+    if not _same(views, original):
+        _fail("input-unchanged", f"{label}: retrieve() modified its input in place")
+    ranked = [int(first.index[i, np.argmax(first.confidence[i])])
+              if (first.index[i] >= 0).any() else -1 for i in range(n)]
+    wrong = [i for i in range(n) if ranked[i] != i]
+    if wrong:
+        _fail("self-retrieval", f"{label}: with the database holding the query's own view, query "
+              f"{wrong[0]}'s most confident candidate is {ranked[wrong[0]]}, not itself "
+              f"({len(wrong)} of {n} queries)")
+    limit = np.arange(n, dtype=np.int64)
+    online = answer(views, views, db_limit=limit, same_frames=True)
+    late = [(i, int(j)) for i in range(n) for j in online.index[i] if j >= i]
+    if late:
+        _fail("same-frames-earlier", f"{label}: with same_frames, query {late[0][0]} lists frame "
+              f"{late[0][1]}, not an earlier one (the harness would drop it; an online method "
+              "must not see later frames)")
+    if getattr(method, "deterministic", True):
+        again = answer(views, views)
+        if not (np.array_equal(first.index, again.index)
+                and np.array_equal(first.confidence, again.confidence)):
+            _fail("determinism", f"{label}: retrieve() twice on the same views answered differently")
     return method
