@@ -17,7 +17,7 @@ from safl_bench.evaluation import evaluate_method
 from safl_bench.groundtruth import GroundTruth
 from safl_bench.methods.check import MethodCheckError, check_method
 from safl_bench.methods.method import register_method, unregister_method
-from safl_bench.methods.retrieval import NO_SEQUENCE, Retrieval, RetrievalMethod
+from safl_bench.methods.retrieval import NO_SEQUENCE, NOT_RETRIEVED, Retrieval, RetrievalMethod
 from safl_bench.metrics import outcomes
 from safl_bench.results.records import QueryOutcomes
 
@@ -71,6 +71,20 @@ def test_only_single_frame_is_scored_and_recall_at_n_matches_a_descriptor_method
     assert retr.query_s is not None and len(retr.query_s) == n
 
 
+def test_recall_at_1_is_the_single_frame_recall_when_some_queries_get_no_answer() -> None:
+    n = 8
+    C = np.eye(n) * 3.0
+    C[2, 5] = 4.0  # query 2 answers a wrong frame
+    method = ScoreRetrieval(C, k=1)
+    method.k = 1
+    ev = evaluate_method(method, np.arange(n), np.arange(n), line_truth(n))
+    m = ev.metrics["single_frame"]
+    assert m.recall_at_n[1] == m.recall_at_1 == 7 / 8
+    silent = ScoreRetrieval(np.zeros((n, n)), k=0)
+    m0 = evaluate_method(silent, np.arange(n), np.arange(n), line_truth(n)).metrics["single_frame"]
+    assert m0.recall_at_n[1] == m0.recall_at_1 == 0.0  # frame 0 is not "found" by the tie rule
+
+
 def test_equal_confidences_go_to_the_lower_database_index() -> None:
     C = np.zeros((3, 3))
     C[:, 1] = C[:, 2] = 5.0  # the method lists 2 before 1
@@ -99,9 +113,10 @@ def test_a_query_answered_by_nothing_reports_no_match_and_ranks_true_places_afte
     o = ev.outcomes["single_frame"]
     assert o.match.tolist() == [-1, 3, -1, -1]
     assert np.isneginf(o.confidence[[0, 2, 3]]).all()
-    # unreturned frames are tied after the returned ones, lower index first: query 0's true
-    # place (frame 0) ranks first among them, query 1's (frame 1) after frame 3 and frame 0
-    assert o.true_rank.tolist() == [1, 3, 3, 4]
+    # a true place the method did not return is found at no N (rank beyond every list), even
+    # where the tie rule among the frames left out would put it first (query 0, frame 0)
+    assert o.true_rank.tolist() == [NOT_RETRIEVED] * 4
+    assert ev.metrics["single_frame"].recall_at_n == {1: 0.0, 5: 0.0, 10: 0.0}
 
 
 def test_the_matched_frames_relative_pose_is_recorded_and_descriptor_methods_have_none() -> None:

@@ -12,7 +12,9 @@ On the task's views (read once, before any timing), each repeat times, back to b
   everything the harness adds (the view adapter, the method's input checks, ranking under the
   candidate rule, Recall@N and every measure).
 
-Printed: the medians and the harness's overhead, harness / own - 1 (the issue's bound: 10 %).
+Printed: the medians and the harness's overhead, harness / own - 1 (the issue's bound: 10 %),
+and how many scored queries each later repeat answered exactly as the first (MapClosures' RANSAC
+is not seeded: this is how much that moves).
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import statistics
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from safl_bench.errors import ConfigError
 from safl_bench.methods.method import make_method
@@ -51,18 +55,25 @@ def run(method_name: str = DEFAULT_METHOD, task_id: str = DEFAULT_TASK, *,
     queries, database = task.queries(kind), task.database(kind)
     truth = task.truth_for(options.evaluation)
     revisit = task.spec.protocol == "revisit"
-    own, harness = [], []
+    own, harness, answers = [], [], []
     for _ in range(repeats):
         own.append(method.own_calls(queries, database, same_frames=revisit))
         t0 = time.perf_counter()
-        evaluate_method(method, queries, database, truth, config=options.evaluation,
-                        revisit=revisit, context=task.spec.context_queries)
+        ev = evaluate_method(method, queries, database, truth, config=options.evaluation,
+                             revisit=revisit, context=task.spec.context_queries)
         harness.append(time.perf_counter() - t0)
+        answers.append(ev.outcomes["single_frame"])
+    first = answers[0]
+    assert first.match is not None  # the label layer always keeps the matched frames
+    same = [int(np.count_nonzero((a.match == first.match) & (a.confidence == first.confidence)))
+            for a in answers[1:]]
     own_s, harness_s = statistics.median(own), statistics.median(harness)
     return {"method": f"{method.name}@{method.version}", "task": task_id, "views": kind,
             "n_queries": len(queries), "n_database": len(database), "repeats": repeats,
             "own_s": own_s, "harness_s": harness_s, "own_runs_s": own, "harness_runs_s": harness,
-            "overhead": harness_s / own_s - 1 if own_s > 0 else None}
+            "overhead": harness_s / own_s - 1 if own_s > 0 else None,
+            "scored_queries": len(first.match), "answered_first": int(np.count_nonzero(first.match >= 0)),
+            "same_answer_as_first": same}
 
 
 def format_results(r: dict[str, Any]) -> str:
@@ -75,4 +86,7 @@ def format_results(r: dict[str, Any]) -> str:
         f"({1e3 * r['own_s'] / max(r['n_queries'], 1):.2f} ms a query)",
         f"  the harness, whole cell  {r['harness_s']:8.2f} s",
         f"  harness overhead         {overhead} (bound: +10 %)",
+        f"  repeats answering exactly as the first (frame and confidence): "
+        f"{', '.join(str(n) for n in r['same_answer_as_first']) or '-'} of {r['scored_queries']} "
+        f"scored queries ({r['answered_first']} answered in the first)",
     ])

@@ -50,7 +50,7 @@ from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they wer
 )
 from safl_bench.methods.distance import euclidean
 from safl_bench.methods.method import Method
-from safl_bench.methods.retrieval import Retrieval, RetrievalMethod, is_retrieval
+from safl_bench.methods.retrieval import NOT_RETRIEVED, Retrieval, RetrievalMethod, is_retrieval
 
 
 @dataclass
@@ -220,8 +220,9 @@ def evaluate_retrieval(
     """A retrieval method (`safl_bench.methods.retrieval`) on one task's views: its ranked
     candidates, restricted to each query's candidates (`GroundTruth.db_limit` on revisit tasks:
     what it returns beyond them is dropped), become a difference matrix (minus the confidence,
-    +inf where not returned), which the single-frame matcher and `true_place_ranks` read with
-    the one tie rule; only the single-frame mode is scored (no sequence result: no full
+    +inf where not returned), which the single-frame answer and `true_place_ranks` read with
+    the one tie rule (a query none of whose true places was returned gets rank `NOT_RETRIEVED`:
+    found at no N); only the single-frame mode is scored (no sequence result: no full
     difference matrix). The matched frame's relative pose, where the method gives one, goes to
     the outcomes. Revisit queries are the database frames, so the method is told
     ``same_frames``."""
@@ -243,9 +244,15 @@ def evaluate_retrieval(
     matcher_s = time.perf_counter() - t0
     scored = scored_queries(len(D), cfg.trim_queries, context)
     part = subset_truth(truth, scored, slice(None)) if scored != slice(0, len(D)) else truth
-    ranks = true_place_ranks(D[scored], [part.true_matches(i) for i in range(part.n_queries)],
+    true_places = [part.true_matches(i) for i in range(part.n_queries)]
+    ranks = true_place_ranks(D[scored], true_places,
                              db_limit=None if limit is None else limit[scored],
                              dtype=cfg.single_frame.dtype)
+    # a true place the method did not return is retrieved at no N (not by the tie rule among
+    # the frames it left out): its rank lies beyond every list
+    returned = np.isfinite(D[scored])
+    missed = [i for i, js in enumerate(true_places) if len(js) and not returned[i, js].any()]
+    ranks[missed] = NOT_RETRIEVED
     pose = None
     if answer.pose is not None:
         pose = np.stack([answer.pose_of(i, int(j)) for i, j in enumerate(result.index)])[scored]

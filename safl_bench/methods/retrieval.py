@@ -29,8 +29,9 @@ Choices, with the reason for each:
 * Confidence is higher = more confident (a count of inliers, a similarity); the harness ranks by
   it and, among equal confidences, by the lower database index: the tie rule of every other
   method (`safl_bench.evaluation.metrics`, "Ties"). A database frame a method does not return is
-  ranked after every returned one (tied among themselves, lower index first), which makes
-  Recall@N exact for any N.
+  not retrieved: a query none of whose true places was returned counts at no N of Recall@N (its
+  rank is recorded as `NOT_RETRIEVED`), so Recall@1 equals the single-frame recall_at_1 as for every
+  method, and Recall@N reads only what the method listed.
 * Single-frame matching is the top of that ranking; Recall@N and every measure are computed by
   the same code as for descriptor methods, on a difference matrix built from the ranking (minus
   the confidence where a frame was returned, +inf elsewhere). The SEQUENCE matcher needs a full
@@ -57,8 +58,11 @@ import numpy as np
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.methods.method import METHOD_KINDS, Method, Views
 
-__all__ = ["METHOD_KINDS", "NO_SEQUENCE", "NO_SEQUENCE_WHY", "Retrieval", "RetrievalMethod",
+__all__ = ["METHOD_KINDS", "NOT_RETRIEVED", "NO_SEQUENCE", "NO_SEQUENCE_WHY", "Retrieval", "RetrievalMethod",
            "is_retrieval"]
+
+#: The rank recorded for a query none of whose true places the method returned: beyond any N.
+NOT_RETRIEVED = 2**31 - 1
 
 #: What tables and the run summary print for a retrieval method's sequence-matcher cells.
 NO_SEQUENCE = "n/a (retrieval)"
