@@ -17,9 +17,10 @@ pipeline; ``inliers_threshold`` is applied the way its own pipeline applies it
 inliers_threshold``), so a candidate with 5 inliers or fewer is not reported. Fixed in the C++
 (``cpp/map_closures/MapClosures.cpp`` lines 39-52): ORB with 500 features, one level, FAST
 threshold 35; a map skips the 3 maps before it (``no_of_local_maps_to_skip``); a candidate needs
-more than 2 descriptor matches. RANSAC (``AlignRansac2D.cpp``): 688 trials, inliers within 3
-cells, samples drawn from ``std::random_device``: NOT seedable, so inlier counts can differ
-between two identical runs (measured in docs/guides/map-closures.md); `deterministic` is False.
+more than 2 descriptor matches. RANSAC (``AlignRansac2D.cpp`` lines 60-69, 92): 688 trials,
+inliers within 3 cells, samples drawn from ``std::random_device``: NOT seedable, so answers can
+differ between two identical runs (measured in docs/guides/map-closures.md, "Repeatability");
+`deterministic` is False.
 
 How the harness feeds it (MapClosures is online: each call adds the map to its database, and it
 has no query-only call in its Python API, ``Match`` being a protected C++ method):
