@@ -234,3 +234,31 @@ def test_leaderboard_tables_say_the_sequence_matcher_is_na_for_a_retrieval_metho
     assert "map_closures@1: sequence matcher n/a" in md
     only_descriptors = recall_table(*next(iter(group_records(records[:1])[0].items()))).markdown()
     assert "n/a" not in only_descriptors
+
+
+def test_a_points_method_that_reads_top_views_runs_on_an_image_folder(
+        bev_root: Path, safl_home: Path, tmp_path: Path) -> None:
+    from safl_bench import tasks
+    from safl_bench.errors import SaflError
+    from safl_bench.run import runner
+
+    class PointsFirst(Blobs):
+        name: ClassVar[str] = "points_first"
+        input_kind: ClassVar[str] = "points"
+        reads_topview: ClassVar[bool] = True
+
+    class PointsOnly(PointsFirst):
+        name: ClassVar[str] = "points_only"
+        reads_topview: ClassVar[bool] = False
+
+    tasks.register("Test/RetrRevisitPts-v0", source="bev", sequence="00", protocol="revisit",
+                   window_s=5.0, map_config=None)
+    try:
+        options = runner.RunOptions(results_dir=tmp_path / "r", bev_root=str(bev_root),
+                                    progress=False)
+        outcome = runner.run_cell(PointsFirst(), "Test/RetrRevisitPts-v0", options)
+        assert outcome.record is not None and set(outcome.record.results) == {"single_frame"}
+        with pytest.raises(SaflError, match="has no points views"):
+            runner.run_cell(PointsOnly(), "Test/RetrRevisitPts-v0", options)
+    finally:
+        tasks.unregister("Test/RetrRevisitPts-v0")
