@@ -63,6 +63,7 @@ metres, then the ground alignments are undone), i.e. it is T_query^-1 T_ref; its
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from typing import Any, ClassVar
@@ -95,26 +96,32 @@ def density_to_points(image: np.ndarray, cell_m: float = 0.4, levels: int = 10) 
     is 10. Pixel geometry is that of `safl_bench.views.bevdensity` (step 4): with c0 = (size -
     1) / 2, row c0 - k (k > 0) spans x in [k, k + 1) cells ahead, row c0 + k spans (-(k + 1), -k]
     cells behind, row c0 spans (-1, 1) cells; columns likewise along y (left positive)."""
-    img = np.asarray(image, dtype=np.float64)
+    img = np.asarray(image)
     if img.ndim != 2 or img.shape[0] != img.shape[1]:
         raise DataError(f"a top view must be a square (H, W) image, got shape {img.shape}")
-    counts = np.rint(np.clip(img, 0.0, 1.0) * levels).astype(np.int64)
-    rows, cols = np.nonzero(counts)
-    if rows.size == 0:
+    flat = np.rint(np.clip(img, 0.0, 1.0).ravel() * levels).astype(np.int64)
+    pixels = np.flatnonzero(flat)
+    if pixels.size == 0:
         return np.zeros((0, 3))
-    n = counts[rows, cols]
-    c0 = (img.shape[0] - 1) / 2
-    r = np.repeat(rows, n)
-    c = np.repeat(cols, n)
-    slot = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-    sub = _SUB[slot % len(_SUB)]
+    n = flat[pixels]
+    which = np.repeat(pixels, n)
+    slot = (np.arange(which.size) - np.repeat(np.cumsum(n) - n, n)) % len(_SUB)
+    lo, scale = _pixel_spans(img.shape[0])
+    r, c = np.divmod(which, img.shape[1])
+    out = np.zeros((which.size, 3))
+    out[:, 0] = (lo[r] + scale[r] * _SUB[slot, 0]) * cell_m
+    out[:, 1] = (lo[c] + scale[c] * _SUB[slot, 1]) * cell_m
+    return out
 
-    def axis(k: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return np.where(k > 0, k + u, np.where(k < 0, k - u, 2 * u - 1)) * cell_m
 
-    x = axis(c0 - r, sub[:, 0])
-    y = axis(c0 - c, sub[:, 1])
-    return np.stack([x, y, np.zeros_like(x)], axis=1)
+@functools.lru_cache(maxsize=8)
+def _pixel_spans(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per row (or column) index of a `size`-pixel image, the span along its axis in cells:
+    ``lo + scale * u`` for u in [0, 1) (`density_to_points`' pixel geometry)."""
+    k = (size - 1) / 2 - np.arange(size)
+    lo = np.where(k > 0, k, np.where(k < 0, k, -1.0))
+    scale = np.where(k > 0, 1.0, np.where(k < 0, -1.0, 2.0))
+    return lo, scale
 
 
 def usable_features(density_map: Any) -> int:
