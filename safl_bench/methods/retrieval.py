@@ -68,8 +68,8 @@ NOT_RETRIEVED = 2**31 - 1
 NO_SEQUENCE = "n/a (retrieval)"
 
 #: Why, in one line (records' notes, docs, the run summary).
-NO_SEQUENCE_WHY = ("n/a: a retrieval method gives ranked candidates, no difference matrix, so "
-                   "the sequence matcher cannot run")
+NO_SEQUENCE_WHY = ("a retrieval method gives ranked candidates, no difference matrix, so the "
+                   "sequence matcher cannot run")
 
 
 @dataclass(frozen=True)
