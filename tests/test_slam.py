@@ -171,22 +171,108 @@ def test_the_record_holds_each_querys_match(cell: tuple[Path, Path]) -> None:
         np.testing.assert_array_equal(o.match >= 0, np.isfinite(o.confidence))
 
 
-def test_slam_prints_a_table_and_writes_the_same_result_for_a_seed(
+def test_slam_runs_five_seeds_with_intervals_and_resumes(
         cell: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
     root, results = cell
     code, out, err = _run(capsys, root, results)
     assert code == 0, err
-    for word in ("odometry alone", "least-squares", "cauchy", "gnc-tls", "closures accepted", "oracle"):
+    for word in ("odometry alone", "least-squares", "cauchy", "gnc-tls", "closures accepted", "oracle",
+                 "SLAM seeds 0, 1, 2, 3, 4", "95 % interval"):
         assert word in out
-    (path,) = results.rglob("slam-seed-0.json")
-    first = json.loads(path.read_text())
-    assert [b["backend"] for b in first["backends"]] == ["least-squares", "cauchy", "gnc-tls"]
-    assert first["closures_false"] == 0 and first["n_poses"] == 60
+    paths = sorted(results.rglob("slam-seed-0.s*.json"))
+    assert [p.name.split(".")[1] for p in paths] == ["s0", "s1", "s2", "s3", "s4"]
+    first = [json.loads(p.read_text()) for p in paths]
+    assert {r["kind"] for r in first} == {slam_cell.RESULT_KIND}
+    assert [r["slam_seed"] for r in first] == [0, 1, 2, 3, 4] and {r["seed"] for r in first} == {0}
+    assert [b["backend"] for b in first[0]["backends"]] == ["least-squares", "cauchy", "gnc-tls"]
+    assert first[0]["closures_false"] == 0 and first[0]["n_poses"] == 60
+    assert len({r["odometry_ate_m"] for r in first}) == 5  # a drift draw per seed
+    # the interval printed is the bootstrap over the five seeds' values
+    interval = slam_cell.seed_interval([r["odometry_ate_m"] for r in first])
+    assert interval.format(decimals=2) in out and interval.low <= interval.mean <= interval.high
+    # a re-run resumes: the files are read, not recomputed (same 'created')
+    paths[2].unlink()
     assert _run(capsys, root, results)[0] == 0
-    again = json.loads(path.read_text())
-    for result in (first, again):
+    again = [json.loads(p.read_text()) for p in sorted(results.rglob("slam-seed-0.s*.json"))]
+    assert [r["created"] for r in again][:2] == [r["created"] for r in first][:2]
+    assert paths[2].is_file()  # the missing seed computed again
+    for result in (first[2], again[2]):
         result.pop("created"), result.pop("seconds")
-    assert again == first
+    assert again[2] == first[2]
+    # other settings are other files
+    assert _run(capsys, root, results, "--drift", "high", "--slam-seeds", "2")[0] == 0
+    assert len(list(results.rglob("slam-seed-0.s*.json"))) == 7
+
+
+def test_paired_differences_over_seeds_cancel_the_shared_drift() -> None:
+    base = np.array([10.0, 14.0, 9.0, 12.0, 20.0])
+    diff = slam_cell.paired_ate_difference(base + 1.0, base)
+    assert diff.mean == pytest.approx(1.0) and diff.low == pytest.approx(1.0) and diff.excludes_zero()
+    assert not slam_cell.seed_interval(base).excludes_zero() or slam_cell.seed_interval(base).low > 0
+    assert slam_cell.seed_interval([1.0, float("nan")]).format() == "n/a"
+
+
+def test_a_non_converged_back_end_is_reported_as_such() -> None:
+    def result(seed: int, ate: float | None) -> slam_cell.SlamResult:
+        backends = [slam_cell.BackendResult(n, ate is not None or n != "gnc-tls", "why",
+                                            1.0 if n != "gnc-tls" else ate, None)
+                    for n in ("least-squares", "cauchy", "gnc-tls")]
+        return slam_cell.SlamResult(
+            method="m@1", task="T", seed=0, settings={}, threshold=None, threshold_rule="r",
+            drift={"level": "mid"}, n_poses=3, closures_true=0, closures_false=0, odometry_ate_m=2.0,
+            odometry_rpe_m=None, backends=backends, seconds=0.0, record_created="", slam_seed=seed)
+    text = slam_cell.summary_table([result(0, 1.0), result(1, None)])
+    line = next(x for x in text.splitlines() if x.startswith("gnc-tls"))
+    assert "n/a" in line and "did not converge on seed(s) 1" in line
+
+
+def test_deployment_pairs_each_sequence_with_another() -> None:
+    for task, other in slam_cell.DEPLOY_FROM.items():
+        assert other != task and slam_cell.DEPLOY_FROM[other] == task
+    assert slam_cell.deploy_source("SAFL/BEVKITTI00-Revisit-v0") == "SAFL/BEVKITTI02-Revisit-v0"
+    assert slam_cell.deploy_source("SAFL/BEVKITTI00-Revisit-RotQueries-v0") == "SAFL/BEVKITTI02-Revisit-v0"
+    with pytest.raises(ConfigError, match="--threshold-from"):
+        slam_cell.deploy_source("Test/Nowhere-Revisit-v0")
+
+
+def test_a_methods_own_relative_pose_is_the_closures_measurement(cell: tuple[Path, Path]) -> None:
+    from safl_bench.tasks.task import Task
+
+    root, results = cell
+    path = _record_file(results)
+    data = json.loads(path.read_text())
+    queries = data["results"]["sequence"]["queries"]
+    n = len(queries["match"])
+    # the method says: the match sits 1 m ahead of the query, turned by 0.1 rad; none for query 0
+    queries["relative_pose"] = [None] + [[1.0, 0.0, 0.1]] * (n - 1)
+    record = load_record_text(dumps_record(data), path)
+    from safl_bench.tasks.registry import runnable_spec
+
+    task = Task.from_spec(runnable_spec(TASK), bev_root=str(root), progress=False)
+    below = float(np.nanmin(np.where(np.array(queries["match"]) >= 0,
+                                     record.results["sequence"].queries.outcomes().confidence, np.nan)))
+    settings = slam_cell.SlamSettings(threshold=below, rpe_delta_m=10.0)
+    own = slam_cell.run_slam(record, task, settings)
+    accepted = own.closures_true + own.closures_false
+    assert accepted > 1 and own.closures_estimated == accepted - (queries["match"][0] >= 0)
+    plain = slam_cell.run_slam(load_record(path), task, settings)
+    assert plain.closures_estimated == 0 and own.backends[0].ate_m != plain.backends[0].ate_m
+    # the measurement is the estimate inverted: the query 1 m behind the match, turned back
+    measured = closure_measurements(np.zeros((3, 3)), np.array([1, 2]), np.array([0, 0]),
+                                    np.array([True, False]), np.ones(2), 0,
+                                    np.array([[1.0, 0.0, 0.1], [np.nan] * 3]))
+    assert measured.estimated is not None and measured.estimated.tolist() == [True, False]
+    np.testing.assert_allclose(compose(np.array([1.0, 0.0, 0.1]), measured.measured[0]), 0, atol=1e-12)
+
+
+def load_record_text(text: str, like: Path):  # type: ignore[no-untyped-def]
+    """A record loaded from `text` (written beside `like`'s folder, in a temporary name)."""
+    target = like.with_name("relpose-tmp.json")
+    target.write_text(text)
+    try:
+        return load_record(target)
+    finally:
+        target.unlink()
 
 
 def test_a_threshold_below_every_match_accepts_them_all(cell: tuple[Path, Path],

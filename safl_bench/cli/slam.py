@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from safl_bench.cli.options import add_bev_arguments, seed
+from safl_bench.cli.options import add_bev_arguments, seed, seed_count
 
 HELP = (
     "Run one cell (method, revisit task, seed) through a pose-graph back-end from its result "
@@ -36,6 +36,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="deploy the threshold chosen on another task instead: the lowest that "
                              "keeps 100 %% precision in the method's record there (same seed), "
                              "e.g. KITTI 02's revisit task for KITTI 00's")
+    parser.add_argument("--deployed", action="store_true",
+                        help="deploy the threshold of the task's fixed partner sequence "
+                             "(safl_bench.slam.cell.DEPLOY_FROM: KITTI 00<->02, 05<->06, Synth00<->09), "
+                             "the leaderboard's operating point")
+    parser.add_argument("--slam-seeds", type=seed_count, metavar="N",
+                        help="run SLAM seeds 0 to N-1 from the one record: seed s draws the "
+                             "odometry drift and closure noise s, the same for every method "
+                             "(default 5; 1 with --out); prints the mean and 95 %% interval over them")
     parser.add_argument("--curve", type=int, metavar="N",
                         help="instead of one threshold, N from no closure to every match (evenly "
                              "spaced quantiles of the confidences): one line each, the curve as JSON "
@@ -68,11 +76,15 @@ def main(args: argparse.Namespace) -> int:
         record_path,
     )
     from safl_bench.slam.cell import (
+        DEFAULT_SLAM_SEEDS,
         SlamSettings,
         curve_table,
+        deploy_source,
         deployed_threshold,
         result_path,
-        run_slam,
+        run_seeds,
+        settings_key,
+        summary_table,
         table,
         threshold_curve,
         write_result,
@@ -98,6 +110,11 @@ def main(args: argparse.Namespace) -> int:
     if args.curve is not None and (args.threshold is not None or args.threshold_from is not None):
         raise ConfigError("--curve takes its own thresholds: give it without --threshold and "
                           "--threshold-from")
+    if args.deployed:
+        if args.threshold_from is not None or args.threshold is not None:
+            raise ConfigError("--deployed chooses the threshold itself: give it without "
+                              "--threshold and --threshold-from")
+        args.threshold_from = deploy_source(registered.id)
     if args.threshold_from is not None:
         if args.threshold is not None:
             raise ConfigError("give --threshold or --threshold-from, not both")
@@ -125,8 +142,19 @@ def main(args: argparse.Namespace) -> int:
         print(curve_table(curve))
         print(f"result: {out}")
         return 0
-    result = run_slam(record, task, settings)
-    out = write_result(Path(args.out) if args.out else result_path(results, record), result)
-    print(table(result))
-    print(f"result: {out}")
+    if args.out and args.slam_seeds in (None, 1):
+        seeded = dataclasses.replace(settings, seed=0)
+        result = run_seeds(record, task, seeded, [0])[0]
+        print(table(result))
+        print(f"result: {write_result(Path(args.out), result)}")
+        return 0
+    if args.out:
+        raise ConfigError("--out names one result file: give it with --slam-seeds 1")
+    runs = run_seeds(record, task, settings, range(args.slam_seeds or DEFAULT_SLAM_SEEDS), results)
+    if len(runs) == 1:
+        print(table(runs[0]))
+    else:
+        print(summary_table(runs))
+    print(f"results: {result_path(results, record, dataclasses.replace(settings, seed=0)).parent}"
+          f" (slam-*.s<seed>.{settings_key(settings)}.json)")
     return 0

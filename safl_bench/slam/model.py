@@ -18,6 +18,11 @@ Every choice here is stated with its source in docs/guides/slam.md; in short:
   constraints, IROS 2012; the GNC paper's experiments, Yang et al., RA-L 2020).
   Each closure's noise is seeded by (seed, query, match), so two methods that accept the same
   closure give the back-end the same measurement.
+* **A method's own estimate**: where the record holds the method's relative pose for a query
+  (`QueryOutcomes.relative_pose`: the matched frame's pose in the query's frame, as MapClosures'
+  RANSAC alignment gives it), that estimate, inverted into this module's convention (the query's
+  pose in the match's frame), is the closure's measurement instead of the simulated one, true
+  and false closures alike (`Closures.estimated` says which).
 """
 
 from __future__ import annotations
@@ -160,15 +165,20 @@ class Closures:
     measured: np.ndarray  # (k, 3) pose of `query` in the frame of `match`
     true: np.ndarray  # (k,) bool
     confidence: np.ndarray  # (k,) float64
+    #: (k,) bool: the measurement is the method's own estimate, not simulated (None: none is)
+    estimated: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.query)
 
 
 def closure_measurements(poses: np.ndarray, query: np.ndarray, match: np.ndarray, true: np.ndarray,
-                         confidence: np.ndarray, seed: int) -> Closures:
+                         confidence: np.ndarray, seed: int,
+                         relative_pose: np.ndarray | None = None) -> Closures:
     """The measured relative poses of accepted closures (module doc): true ones the ground truth
-    with registration noise, false ones uniformly random."""
+    with registration noise, false ones uniformly random; where `relative_pose` (k, 3), the
+    method's estimate of the match's pose in the query's frame, has a finite row, that estimate
+    (inverted) instead."""
     poses = np.asarray(poses, np.float64)
     query, match = np.asarray(query, np.int64), np.asarray(match, np.int64)
     true = np.asarray(true, bool)
@@ -182,5 +192,11 @@ def closure_measurements(poses: np.ndarray, query: np.ndarray, match: np.ndarray
         else:
             xy = rng.uniform(-OUTLIER_TRANSLATION_M, OUTLIER_TRANSLATION_M, 2)
             measured[k] = [xy[0], xy[1], rng.uniform(-np.pi, np.pi)]
+    estimated = None
+    if relative_pose is not None:
+        own = np.asarray(relative_pose, np.float64).reshape(len(query), 3)
+        estimated = np.isfinite(own).all(axis=1)
+        # T_query^-1 T_match inverted: the query's pose in the match's frame
+        measured[estimated] = between(own[estimated], np.zeros(3))
     return Closures(query=query, match=match, measured=measured, true=true,
-                    confidence=np.asarray(confidence, np.float64))
+                    confidence=np.asarray(confidence, np.float64), estimated=estimated)
