@@ -16,6 +16,8 @@
                                                  cached, wall time and load average
   safl-bench bench retrieval [--method map_closures] [--task ID]   a retrieval method's own
                                                  calls against the harness's whole cell
+  safl-bench bench slam [--repeats N]            one loop-closure cell of KITTI 00's size (4541
+                                                 poses, 320 closures, three back-ends), median
 
 The map-building and synthetic-LiDAR figures are pytest-benchmark files run from a checkout
 (`pytest tests/bench_maps.py tests/bench_synth.py --benchmark-only`), see the README.
@@ -33,7 +35,7 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
-    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job", "retrieval"), help="what to time")
+    parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job", "retrieval", "slam"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time, NAME or NAME@VERSION (repeatable; default: every registered "
                         "version; seeds: stable_afl@1, bigan@1)")
     parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v5; "
@@ -94,6 +96,11 @@ def main(args: argparse.Namespace) -> int:
         return _bevplace(args)
     if args.what == "seeds":
         return _seeds(args)
+    if args.what == "slam":
+        from safl_bench.bench import slam_bench
+
+        print(slam_bench.format_results(slam_bench.run(args.repeats or 3)))
+        return 0
     if args.what == "retrieval":
         from safl_bench.bench import retrieval_bench
 

@@ -48,10 +48,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="instead of one threshold, N from no closure to every match (evenly "
                              "spaced quantiles of the confidences): one line each, the curve as JSON "
                              "(default slam-curve-seed-<n>.json beside the record)")
+    parser.add_argument("--plot", metavar="PNG",
+                        help="also draw the cell: ground truth, odometry and each back-end's "
+                             "trajectory with true/false closures (SLAM seed 0); with --curve, "
+                             "ATE against closures accepted of this method and those of --also")
+    parser.add_argument("--also", action="append", default=[], metavar="NAME[@VERSION]",
+                        help="with --curve: another method's curve on the same axes (repeatable)")
     parser.add_argument("--drift", choices=list(DRIFT_LEVELS), default=DEFAULT_DRIFT,
                         help="odometry drift level (default %(default)s; docs/guides/slam.md)")
-    parser.add_argument("--mode", choices=["sequence", "single_frame"], default="sequence",
-                        help="whose matches become closures (default %(default)s)")
+    parser.add_argument("--mode", choices=["sequence", "single_frame"],
+                        help="whose matches become closures (default: the sequence matcher's, or "
+                             "single_frame for a method whose records hold only those, a retrieval "
+                             "method such as map_closures)")
     parser.add_argument("--rpe-delta", type=float, default=100.0, metavar="M",
                         help="the distance of the RPE in metres (default %(default)s)")
     parser.add_argument("--results", metavar="DIR",
@@ -97,6 +105,11 @@ def main(args: argparse.Namespace) -> int:
     cell_seed = registered.seed if args.seed is None else int(args.seed)
     cls = method_class(resolve_method(args.method, registered.source))
 
+    def _existing(path: Path) -> Path:
+        if not path.is_file():
+            raise DataError(f"no record {path}; make it with safl-bench run")
+        return path
+
     def record_of(task_id: str) -> ResultRecord:
         path = record_path(results, cls.name, cls.version, task_id, cell_seed)
         if not path.is_file():
@@ -106,6 +119,8 @@ def main(args: argparse.Namespace) -> int:
         return load_record(path)
 
     record = record_of(registered.id)
+    if args.mode is None:
+        args.mode = "sequence" if "sequence" in record.results else "single_frame"
     threshold, rule = args.threshold, None
     if args.curve is not None and (args.threshold is not None or args.threshold_from is not None):
         raise ConfigError("--curve takes its own thresholds: give it without --threshold and "
@@ -141,7 +156,22 @@ def main(args: argparse.Namespace) -> int:
                                           sort_keys=True, allow_nan=False) + "\n")
         print(curve_table(curve))
         print(f"result: {out}")
+        if args.plot:
+            from safl_bench.leaderboard.slam_figures import curve_figure
+
+            curves = {curve[0].method: curve}
+            for name in args.also:
+                other_cls = method_class(resolve_method(name, registered.source))
+                other_record = load_record(_existing(record_path(
+                    results, other_cls.name, other_cls.version, registered.id, cell_seed)))
+                curves[f"{other_cls.name}@{other_cls.version}"] = threshold_curve(
+                    other_record, task, settings, args.curve)
+                print(curve_table(curves[f"{other_cls.name}@{other_cls.version}"]))
+            curve_figure(curves, Path(args.plot))
+            print(f"picture: {args.plot}")
         return 0
+    if args.also:
+        raise ConfigError("--also adds curves: give it with --curve and --plot")
     if args.out and args.slam_seeds in (None, 1):
         seeded = dataclasses.replace(settings, seed=0)
         result = run_seeds(record, task, seeded, [0])[0]
@@ -157,4 +187,11 @@ def main(args: argparse.Namespace) -> int:
         print(summary_table(runs))
     print(f"results: {result_path(results, record, dataclasses.replace(settings, seed=0)).parent}"
           f" (slam-*.s<seed>.{settings_key(settings)}.json)")
+    if args.plot:
+        from safl_bench.leaderboard.slam_figures import trajectory_figure
+        from safl_bench.slam.cell import cell_trajectories
+
+        trajectory_figure(cell_trajectories(record, task, dataclasses.replace(settings, seed=0)),
+                          Path(args.plot))
+        print(f"picture: {args.plot}")
     return 0

@@ -226,6 +226,21 @@ def build_leaderboard(
             if key.source_kind == "bev":  # real KITTI: its tables stand in the index itself
                 entry.inline = [table.markdown(level=4)] + ([published_bevplace_markdown(4)] if bevplace else [])
             writer.text(f"tables/{base}.csv", table.csv())
+            if not bevplace:  # loop closure in SLAM, from the result files beside the records
+                from safl_bench.leaderboard import slam_table
+
+                slam_folder = Path(records_folder(group[0])) if records_folder else out / "records"
+                slam_cells = slam_table.load_cells(group, slam_folder)
+                slam_md = slam_table.slam_markdown(key.caption, slam_cells)
+                if slam_md is not None:
+                    rel = writer.text(f"tables/{base}-slam.md", slam_md)
+                    writer.text(f"tables/{base}-slam.json", slam_table.slam_json(slam_cells))
+                    entry.tables.append(("Loop closure in SLAM: ATE per back-end", rel))
+                    if figures:
+                        from safl_bench.leaderboard import slam_figures
+
+                        entry.figures.append(("SLAM: ATE per method and back-end", writer.figure(
+                            f"figures/{base}-slam-ate.png", partial(slam_figures.ate_bars, slam_cells))))
             if figures:
                 rel = f"figures/{base}-pr.png"
                 entry.figures.append(

@@ -43,6 +43,7 @@ from safl_bench.results.records import ResultRecord, record_path, rerun_command,
 from safl_bench.slam.backend import BACKENDS, solve, trajectory_errors
 from safl_bench.slam.model import (
     DEFAULT_DRIFT,
+    Closures,
     closure_measurements,
     drift_level,
     simulate_odometry,
@@ -305,6 +306,43 @@ def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = N
         closures_estimated=0 if closures.estimated is None else int(closures.estimated.sum()),
         ate_alignment=("Umeyama, SE(3), no scale" if reference.aligned else "none: the true path "
                        "is a straight line; errors in the frame of the first pose"))
+
+
+@dataclass(frozen=True)
+class CellTrajectories:
+    """What a cell's picture shows: the true poses, the odometry's trajectory, each back-end's
+    optimised one (None: did not converge) and the accepted closures."""
+
+    result: SlamResult
+    truth: np.ndarray
+    odometry: np.ndarray
+    optimised: dict[str, np.ndarray | None]
+    closures: Closures
+
+
+def cell_trajectories(record: ResultRecord, task: Task, settings: SlamSettings) -> CellTrajectories:
+    """`run_slam` of the cell, with the trajectories it measured (solved once more: a result
+    file keeps numbers, not trajectories)."""
+    result = run_slam(record, task, settings)
+    outcomes = record.results[settings.mode].queries
+    assert outcomes is not None
+    o = outcomes.outcomes()
+    assert o.match is not None
+    poses = poses_of(task)[: result.n_poses]
+    trim = int(record.matcher.get("evaluation", {}).get("trim_queries") or 0)
+    start = max(task.spec.context_queries, trim)
+    answered = o.match >= 0
+    accepted = (answered & (o.confidence >= result.threshold) if result.threshold is not None
+                else np.zeros_like(answered))
+    index = np.flatnonzero(accepted)
+    own = getattr(o, "relative_pose", None)
+    slam_seed = record.seed if settings.seed is None else int(settings.seed)
+    closures = closure_measurements(poses, start + index, o.match[index], (o.label == CORRECT)[index],
+                                    o.confidence[index], slam_seed,
+                                    None if own is None else np.asarray(own)[index])
+    odometry = simulate_odometry(poses, drift_level(settings.drift), slam_seed)
+    optimised = {name: solve(poses[0], odometry, closures, name).trajectory for name in BACKENDS}
+    return CellTrajectories(result, poses, odometry.trajectory, optimised, closures)
 
 
 def curve_thresholds(record: ResultRecord, mode: str = "sequence", points: int = 10) -> list[float | None]:

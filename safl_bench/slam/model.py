@@ -192,10 +192,10 @@ def closure_measurements(poses: np.ndarray, query: np.ndarray, match: np.ndarray
         else:
             xy = rng.uniform(-OUTLIER_TRANSLATION_M, OUTLIER_TRANSLATION_M, 2)
             measured[k] = [xy[0], xy[1], rng.uniform(-np.pi, np.pi)]
-    estimated = None
+    estimated: np.ndarray | None = None
     if relative_pose is not None:
         own = np.asarray(relative_pose, np.float64).reshape(len(query), 3)
-        estimated = np.isfinite(own).all(axis=1)
+        estimated = np.asarray(np.isfinite(own).all(axis=1), bool)
         # T_query^-1 T_match inverted: the query's pose in the match's frame
         measured[estimated] = between(own[estimated], np.zeros(3))
     return Closures(query=query, match=match, measured=measured, true=true,
