@@ -46,6 +46,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="run exactly this noise seed on every task; repeatable")
     parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")
     parser.add_argument("--force", action="store_true", help="recompute cells whose record exists")
+    parser.add_argument("--slam", action="store_true",
+                        help="after the cells, run each revisit cell through the loop-closure stage "
+                             "at its deployed threshold (safl-bench slam --deployed; needs "
+                             "safl-bench[slam])")
     parser.add_argument(
         "--weights", metavar="PATH|shipped|untrained",
         help="learned methods: a weights file from `safl-bench train`, the shipped ones for each "
@@ -173,6 +177,11 @@ def main(args: argparse.Namespace) -> int:
     labels = ', '.join(dict.fromkeys(ran))
     print(f"{labels} — records in {options.results_dir}")
     print(summary_table(outcomes))
+    if args.slam:
+        from safl_bench.cli.slam import after_cells
+
+        after_cells(outcomes, options.results_dir, kitti_root=args.kitti_root,
+                    bev_root=args.bev_root, bev_resolution_m=args.bev_resolution)
     failed = [o for o in outcomes if o.status == "failed"]
     if failed:
         print(f"safl-bench: {len(failed)} of {len(outcomes)} cells failed (see above); "

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from safl_bench.run.runner import CellOutcome
 
 from safl_bench.cli.options import add_bev_arguments, seed, seed_count
 
@@ -195,3 +199,56 @@ def main(args: argparse.Namespace) -> int:
                           Path(args.plot))
         print(f"picture: {args.plot}")
     return 0
+
+
+def after_cells(outcomes: list[CellOutcome], results_dir: Path, *, kitti_root: str | None = None,
+                bev_root: str | None = None, bev_resolution_m: float | None = None) -> None:
+    """`safl-bench run --slam`: each revisit cell just run (not failed) through the loop-closure
+    stage at its deployed threshold (`slam.cell.DEPLOY_FROM`, the partner sequence's record of the
+    same method and seed, from this run or `results_dir`), over the default SLAM seeds, result
+    files beside the records (a re-run resumes); a cell whose partner has no record, or whose
+    task has no partner, is named with the command that runs it instead."""
+    import dataclasses
+
+    from safl_bench.errors import SaflError
+    from safl_bench.results.records import load_record, record_path
+    from safl_bench.slam.cell import (
+        DEFAULT_SLAM_SEEDS,
+        DEPLOY_FROM,
+        SlamSettings,
+        deployed_threshold,
+        run_seeds,
+        summary_table,
+    )
+    from safl_bench.tasks.registry import runnable_spec
+    from safl_bench.tasks.task import Task
+
+    for o in outcomes:
+        record = o.record
+        if o.status == "failed" or record is None or record.task.protocol != "revisit":
+            continue
+        cell = f"{record.method.name}@{record.method.version} on {record.task.id} seed {record.seed}"
+        partner = DEPLOY_FROM.get(record.task.id)
+        other = None if partner is None else record_path(
+            results_dir, record.method.name, record.method.version, partner, record.seed)
+        if other is None or not other.is_file():
+            print(f"slam: {cell}: no " + (f"record on its partner {partner} to deploy a threshold from; "
+                  "run that task too" if partner else "deployment partner for its task")
+                  + f", or: safl-bench slam --method {record.method.name}@{record.method.version} "
+                  f"--task {record.task.id} --threshold-from ID")
+            continue
+        try:
+            mode = "sequence" if "sequence" in record.results else "single_frame"
+            threshold = deployed_threshold(load_record(other), mode)
+            settings = SlamSettings(mode=mode, threshold=threshold, threshold_rule=(
+                f"deployed: the lowest keeping 100 % precision on {partner} seed {record.seed}, "
+                "chosen there" + ("" if threshold is not None else "; none does, so no closure")))
+            spec = runnable_spec(record.task.id)
+            if spec.seed != record.seed:
+                spec = dataclasses.replace(spec, seed=record.seed)
+            task = Task.from_spec(spec, kitti_root=kitti_root, bev_root=bev_root,
+                                  bev_resolution_m=bev_resolution_m, progress=False)
+            print(summary_table(run_seeds(record, task, settings, range(DEFAULT_SLAM_SEEDS),
+                                          results_dir)))
+        except (SaflError, ImportError) as error:
+            print(f"slam: {cell}: {error}")

@@ -3,7 +3,8 @@
 
 * `trajectory_figure`: one cell: ground truth, odometry alone and each back-end's optimised
   trajectory, the accepted closures as lines between their two true positions, true ones green
-  and false ones red (drawn on the ground truth, where a reader can see which places they join).
+  and false ones red, drawn between their two poses on the odometry's trajectory (the drift the
+  closure has to undo; on the ground truth a true closure's ends would coincide).
 * `curve_figure`: ATE against the threshold of several methods on one axis (one panel per
   back-end), the x axis the closures accepted, from none to every match: thresholds of different
   methods are on different scales, the number of closures is not.
@@ -35,7 +36,7 @@ def trajectory_figure(cell: CellTrajectories, path: Path) -> None:
     for flag, colour, label in ((True, "tab:green", "true closure"), (False, "tab:red", "false closure")):
         pick = closures.true == flag
         if pick.any():
-            q, m = truth[closures.query[pick], :2], truth[closures.match[pick], :2]
+            q, m = cell.odometry[closures.query[pick], :2], cell.odometry[closures.match[pick], :2]
             segments = np.stack([q, m], axis=1)
             xs = np.column_stack([segments[:, :, 0], np.full(len(segments), np.nan)]).ravel()
             ys = np.column_stack([segments[:, :, 1], np.full(len(segments), np.nan)]).ravel()
