@@ -382,3 +382,55 @@ def test_outcomes_keep_a_valid_match_per_query() -> None:
     for bad in ([-2, 0], [1], [0.5, 1.0]):
         with pytest.raises(DataError, match="match must be integers >= -1"):
             outcomes([2.0, 1.0], [True, True], [True, True], match=np.array(bad))
+
+
+def test_run_slam_then_the_leaderboard_table_and_pictures(
+        cell: tuple[Path, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from safl_bench.leaderboard import slam_figures, slam_table
+    from safl_bench.results.records import load_records
+
+    root, results = cell
+    monkeypatch.setattr(slam_cell, "DEPLOY_FROM", {TASK: OTHER, OTHER: TASK})
+    monkeypatch.setenv("SAFL_HOME", str(tmp_path / "home"))
+    code = cli_main(["run", "--method", "sad@1", "--task", TASK, "--bev-root", str(root),
+                     "--results", str(results), "--slam", "--quiet"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert f"deployed: the lowest keeping 100 % precision on {OTHER}" in out and "95 % interval" in out
+    records = [r for r in load_records(results)[0] if r.task.id == TASK]
+    cells = slam_table.load_cells(records, results)
+    assert [(c.method, c.mode, len(c.results)) for c in cells] == [("sad@1", "sequence", 5)]
+    md = slam_table.slam_markdown("tiny", cells)
+    assert md is not None and "| odometry alone |" in md and "| sad@1 | sequence |" in md
+    assert json.loads(slam_table.slam_json(cells))[0]["ate_least-squares"][0] == pytest.approx(
+        np.mean(cells[0].ate("least-squares")))
+    # other settings never enter the table
+    assert slam_table.load_cells(records, tmp_path) == []
+    # pictures: the cell, the curves, the table's bars
+    from safl_bench.tasks.registry import runnable_spec
+    from safl_bench.tasks.task import Task
+
+    task = Task.from_spec(runnable_spec(TASK), bev_root=str(root), progress=False)
+    record = records[0]
+    trajectories = slam_cell.cell_trajectories(record, task, slam_cell.SlamSettings(rpe_delta_m=10.0))
+    assert set(trajectories.optimised) == {"least-squares", "cauchy", "gnc-tls"}
+    for name, draw in (("cell.png", partial_draw(slam_figures.trajectory_figure, trajectories)),
+                       ("curve.png", partial_draw(slam_figures.curve_figure, {"sad@1": slam_cell.threshold_curve(
+                           record, task, slam_cell.SlamSettings(rpe_delta_m=10.0), 3)})),
+                       ("bars.png", partial_draw(slam_figures.ate_bars, cells))):
+        draw(tmp_path / name)
+        assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
+
+
+def partial_draw(function, first):  # type: ignore[no-untyped-def]
+    return lambda path: function(first, path)
+
+
+def test_the_benchmark_cell_is_kitti00_sized() -> None:
+    from safl_bench.bench import slam_bench
+
+    poses, query, match, true = slam_bench.kitti00_sized_cell()
+    assert poses.shape == (4541, 3) and len(query) == len(match) == 320 and true.sum() == 300
+    distance = np.hypot(*(poses[query, :2] - poses[match, :2]).T)
+    assert (distance[true] < 1.0).all() and (distance[~true] > 50).all()
