@@ -719,7 +719,9 @@ class BevPlace(Method):
     cache_descriptors: ClassVar[bool] = True
     #: `safl-bench bench methods` times it at the published images' size.
     bench_view_size: ClassVar[int] = 151
-    #: Runs the authors' published weights, shipped with the package; not trained here.
+    #: Runs the authors' published weights, shipped with the package; not trained here. They were
+    #: trained on KITTI 00 frames 0-2999 (`safl_bench.methods.training_data.BEVPLACE_KITTI`, known
+    #: by the SHA-256 of this file and of the authors' checkpoint): records on 00 are marked.
     ships_weights: ClassVar[bool] = True
     #: `fast` changes descriptors by < 1e-6 (tested < 1e-5), `batch_size` not at all.
     runtime_params: ClassVar[tuple[str, ...]] = ("batch_size", "fast")

@@ -111,3 +111,87 @@ def test_train_without_out_writes_a_folder_per_version(tmp_path, monkeypatch, sa
                  "--set", "hidden=8"]) == 0
     (run,) = (safl_home / "weights").iterdir()
     assert run.name == "bigan-v1-bev-seed0" and (run / "bigan.safetensors").is_file()
+
+
+# -- weights that saw a frame range of a sequence (BEVPlace's: KITTI 00 frames 0-2999) -----------
+BEVPLACE_SHIPPED = {"sha256": "66a5012eab66f5185414ef4494552f9406326f3ecd133916d58e124c3698add1"}
+
+
+def _spec(n_database: int, n_queries: int, step: int = 1,
+          database: tuple[int, int] | None = None, queries: tuple[int, int] | None = None) -> dict:
+    """A record's task spec, as far as the frames go: ranges (BEVPlace's protocol) or none (the
+    whole sequence from frame 0, every `step`-th)."""
+    spec: dict = {"step": step, "n_database": n_database, "n_queries": n_queries}
+    if database is not None:
+        spec.update(database_frames=list(database), query_frames=list(queries or ()))
+    return spec
+
+
+def test_bevplace_weights_saw_kitti_00_frames_0_to_2999_only() -> None:
+    from pathlib import Path
+
+    from safl_bench.training_data import BEVPLACE_KITTI, trained_on
+
+    root = Path(__file__).resolve().parents[1]
+    assert SHIPPED[file_sha256(root / "baselines/weights/bevplace.safetensors")] == BEVPLACE_KITTI
+    data = trained_on(BEVPLACE_SHIPPED)
+    assert data is not None and data.sequences == ("00",) and data.frame_range("00") == (0, 2999)
+    assert TrainedOn.from_dict(data.to_dict()) == data
+    assert "frames" not in TrainedOn("bev", "x", ("02",), 4).to_dict()  # older dicts unchanged
+
+
+def test_a_frame_range_labels_cells_seen_partly_seen_or_unseen() -> None:
+    from safl_bench.training_data import (
+        PARTLY_SEEN_MARK,
+        PARTLY_SEEN_PREFIX,
+        seen_kind,
+        seen_mark,
+    )
+
+    params = {"weights": BEVPLACE_SHIPPED}
+    label = "KITTI top-view images"
+    # BEVPlace's protocol on 00: the whole database was trained on, none of the queries
+    note = seen_note(params, "bev", label, "00", _spec(3000, 1341, 1, (0, 3000), (3200, 4541)))
+    assert note is not None and note.startswith(PARTLY_SEEN_PREFIX)
+    assert "whole database (3000 frames, 0\u20132999)" in note
+    assert "none of the 1341 queries (3200\u20134540)" in note
+    assert seen_kind(note) == "partly" and seen_mark(note) == PARTLY_SEEN_MARK
+    # the whole sequence every 4th frame (revisit, paper protocol): 750 of 1136 frames were seen
+    note = seen_note(params, "kitti", "KITTI", "00", _spec(1136, 1136, 4))
+    assert note is not None and "750 of the 1136 database frames" in note
+    assert "750 of the 1136 queries" in note
+    # every frame inside the range: seen in training, not partly
+    inside = seen_note(params, "bev", label, "00", _spec(100, 100, 10, (0, 1000), (2000, 3000)))
+    assert inside is not None and seen_kind(inside) == "seen" and seen_mark(inside) == SEEN_MARK
+    # no frame inside the range: not seen; other sequences: not seen
+    assert seen_note(params, "bev", label, "00", _spec(10, 10, 1, (3000, 3010), (3100, 3110))) is None
+    assert seen_note(params, "bev", label, "02", _spec(3400, 1061, 1, (0, 3400), (3600, 4661))) is None
+    # a record that does not say which frames it uses: partly seen, never silently clean
+    unknown = seen_note(params, "bev", label, "00")
+    assert unknown is not None and seen_kind(unknown) == "partly"
+    # whole-sequence training: the note of records made before frame ranges, unchanged
+    assert seen_kind(seen_note({"weights": BEV02}, "bev", label, "02")) == "seen"
+    assert seen_kind(None) is None and seen_mark(None) == ""
+
+
+def test_a_partly_seen_cell_is_its_own_row_never_ranked_and_explained() -> None:
+    from safl_bench.leaderboard.tables import PARTLY_SEEN_MARK, bevplace_table
+    from safl_bench.training_data import record_seen
+
+    spec = _spec(3000, 1341, 1, (0, 3000), (3200, 4541))
+    clean = [scored_record(m, seed=s, skill=k, source_kind="bev", sequence="00", protocol="bevplace",
+                           source_label="KITTI top-view images")
+             for m, k in (("sad", 0.5), ("bevplace", 0.9)) for s in range(2)]
+    clean = [dataclasses.replace(r, task=dataclasses.replace(r.task, spec=spec)) for r in clean]
+    partly = [dataclasses.replace(r, method=dataclasses.replace(r.method,
+                                                                params={"weights": BEVPLACE_SHIPPED}))
+              for r in clean if r.method.name == "bevplace"]
+    assert all(record_seen(r) for r in partly)
+    table = bevplace_table(table_key(clean[0]), [r for r in clean if r.method.name == "sad"] + partly)
+    rows = {row[:2]: i for i, row in enumerate(table.rows)}
+    assert ("bevplace", "1" + PARTLY_SEEN_MARK) in rows and ("sad", "1") in rows
+    mine = rows[("bevplace", "1" + PARTLY_SEEN_MARK)]
+    assert not any(i == mine for i, _ in table.marks)  # better, yet never marked best
+    note = next(n for n in table.notes if "partly seen in training" in n)
+    assert "bevplace on 00: the whole database (3000 frames" in note
+    assert not any("'seen in training'" in n for n in table.notes)  # no fully seen row here

@@ -244,16 +244,15 @@ def _bevplace_reading(published: PublishedTable, several: bool) -> str:
     from safl_bench.leaderboard.tables import (
         PUBLISHED_BEVPLACE,
         PUBLISHED_SEQUENCES,
-        SEEN_MARK,
         UNTRAINED_MARK,
     )
-    from safl_bench.methods.training_data import record_seen, record_untrained
+    from safl_bench.methods.training_data import record_seen, record_untrained, seen_mark
 
     table = published.table
     sequences = sorted({r.task.sequence for r in published.records})
     by: dict[tuple[str, str, str], list[ResultRecord]] = {}
     for r in published.records:
-        version = r.method.version + (SEEN_MARK if record_seen(r) is not None else "")
+        version = r.method.version + seen_mark(record_seen(r))
         version += UNTRAINED_MARK if record_untrained(r) else ""
         by.setdefault((r.method.name, version, r.task.sequence), []).append(r)
     seeds = sorted({r.seed for r in published.records})

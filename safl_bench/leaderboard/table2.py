@@ -105,7 +105,7 @@ def weights_text(record: ResultRecord) -> str:
     parts = []
     if data is not None:
         every = "" if data.step == 1 else f" every {data.step}th frame"
-        parts.append(f"{data.dataset} {'+'.join(data.sequences)}{every}")
+        parts.append(data.describe().replace(", ", "+") + every)  # "KITTI 00 frames 0–2999"
     steps = stored.get("steps", (config.get("params") or {}).get("iterations"))
     if isinstance(steps, int):
         parts.append(f"{steps} iterations")

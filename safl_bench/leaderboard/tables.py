@@ -218,12 +218,15 @@ def _version_key(version: str) -> tuple[int, ...] | tuple[str]:
 
 def _row_sort_key(row: RowKey) -> tuple[object, ...]:
     mode_rank = MODES.index(row[2]) if row[2] in MODES else -1
-    version = row[1].removesuffix(UNTRAINED_MARK).removesuffix(SEEN_MARK)
+    version = row[1].removesuffix(UNTRAINED_MARK).removesuffix(SEEN_MARK).removesuffix(PARTLY_SEEN_MARK)
     return (row[0], _version_key(version), version, row[1] != version, mode_rank, row[2])
 
 
-#: Appended to the version of a row whose records' weights were trained on the task's sequence.
+#: Appended to the version of a row whose records' weights were trained on the task's sequence
+#: (every frame the task uses), or on some of the frames it uses: `safl_bench.methods.training_data`.
+#: (the same strings as there: this module does not import the methods' package at load)
 SEEN_MARK = " (seen in training)"
+PARTLY_SEEN_MARK = " (partly seen in training)"
 #: Appended to the version of a row whose records ran the untrained (random) networks.
 UNTRAINED_MARK = " (untrained)"
 
@@ -263,23 +266,32 @@ def _build(
     on a cell over fewer seeds than the table's: what to make of it and how to fill it.
     `combine`: makes a cell of its seeds' values in place of their mean and bracket (the time
     table's, `_timing_cell`)."""
-    from safl_bench.methods.training_data import record_seen, record_untrained
+    from safl_bench.methods.training_data import (
+        PARTLY_SEEN_PREFIX,
+        record_seen,
+        record_untrained,
+        seen_mark,
+    )
 
     seeds = seed_set(records)
     values: dict[tuple[RowKey, str], dict[int, float | None]] = defaultdict(dict)
     sources: dict[tuple[RowKey, str], dict[int, ResultRecord]] = defaultdict(dict)
     probe: dict[tuple[RowKey, str], tuple[str, str | None]] = {}
     seen_rows: set[RowKey] = set()
+    partly: dict[tuple[str, str], str] = {}  # (method, sequence) -> what its weights saw of it
     any_untrained = False
     for record in records:
-        seen = record_seen(record) is not None
+        note = record_seen(record)
+        mark = seen_mark(note)
+        if mark == PARTLY_SEEN_MARK and note is not None:
+            partly[(record.method.name, record.task.sequence)] = note.removeprefix(PARTLY_SEEN_PREFIX)
         untrained = record_untrained(record)
         any_untrained = any_untrained or untrained
         for v in extract(record):
-            row = (v.row[0], v.row[1] + SEEN_MARK, v.row[2]) if seen else v.row
+            row = (v.row[0], v.row[1] + mark, v.row[2])
             if untrained:
                 row = (row[0], row[1] + UNTRAINED_MARK, row[2])
-            if seen:
+            if mark:
                 seen_rows.add(row)
             values[(row, v.column)][record.seed] = v.value
             sources[(row, v.column)][record.seed] = record
@@ -341,13 +353,19 @@ def _build(
         all_notes.append("Cells without an interval come from records without per-query outcomes "
                          "(metrics version 1): never marked best; `safl-bench run --force` "
                          "recomputes them.")
-    if seen_rows:
+    if any(row[1].removesuffix(UNTRAINED_MARK).endswith(SEEN_MARK) for row in seen_rows):
         # `safl_bench.training_data`: the old path of methods.training_data (it still imports),
         # kept in the published text so that the committed tables regenerate byte for byte
         all_notes.append(f"Rows whose version says '{SEEN_MARK.strip()}': the method's weights "
                          "were trained on this task's sequence (`safl_bench.training_data`); "
                          "their scores measure memory, not generalisation, and are never ranked "
                          "beside the other rows.")
+    if partly:
+        all_notes.append(f"Rows whose version says '{PARTLY_SEEN_MARK.strip()}': the method's "
+                         "weights were trained on some of the frames this task uses, never "
+                         "ranked beside the other rows (`safl_bench.methods.training_data`): "
+                         + "; ".join(f"{name} on {sequence}: {what}"
+                                     for (name, sequence), what in sorted(partly.items())) + ".")
     if any_untrained:
         all_notes.append(f"Rows whose version says '{UNTRAINED_MARK.strip()}': scored with the "
                          "method's untrained (random) networks (`--weights untrained`), not "

@@ -584,7 +584,7 @@ def new_record(
         created=utc_now(),
         metrics_version=METRICS_VERSION,
         seen_in_training=seen_note(method.params, task.source_kind, task.source_label,
-                                   task.sequence),
+                                   task.sequence, task.spec),
     )
 
 

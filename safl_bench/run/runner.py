@@ -696,7 +696,14 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     two, labelled `name@V`); a failed seed gets its own row."""
     from safl_bench.evaluation.uncertainty import bootstrap
     from safl_bench.matching.presets import label
-    from safl_bench.methods.training_data import UNTRAINED_MARK, record_seen, record_untrained
+    from safl_bench.methods.training_data import (
+        PARTLY_SEEN_MARK,
+        SEEN_MARK,
+        UNTRAINED_MARK,
+        record_seen,
+        record_untrained,
+        seen_mark,
+    )
     from safl_bench.results.records import seed_outcomes
 
     labels = method_labels(outcomes)
@@ -705,7 +712,8 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     header = (*lead, "task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC",
               "R@100%P 1-frame", "R@1 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
-    no_interval = any_seen = any_untrained = False
+    no_interval = any_untrained = False
+    marks: set[str] = set()  # the seen-in-training marks of the rows (`seen_mark`)
     for method, task_id, cell in _cells(outcomes):
         records = [o.record for o in cell if o.record is not None]
         first = records[0]
@@ -734,13 +742,13 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         status = ", ".join(f"{s} {statuses.count(s)}" if len(statuses) > 1 else s
                            for s in dict.fromkeys(statuses))
         seq, single = shown["sequence"], shown["single_frame"]
-        seen = record_seen(first) is not None
-        any_seen = any_seen or seen
+        mark = seen_mark(record_seen(first))
+        marks.add(mark)
         untrained = record_untrained(first)
         any_untrained = any_untrained or untrained
         rows.append((
             *((method,) if by_method else ()),
-            task_id + (" (seen in training)" if seen else "") + (UNTRAINED_MARK if untrained else ""),
+            task_id + mark + (UNTRAINED_MARK if untrained else ""),
             format_seed_list([o.seed for o in cell]),
             label(first.matcher), seq["recall_at_100_precision"], seq["f1_max"],
             seq["recall_at_1"], seq["auc"], single["recall_at_100_precision"],
@@ -763,9 +771,13 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         legend += f"; {NO_SEQUENCE}: {NO_SEQUENCE_WHY}; its ms/frame is the method's call per query"
     extra = ["note: some records hold no per-query outcomes (metrics version 1): their cells show "
              "the mean only; `safl-bench run --force` recomputes them"] if no_interval else []
-    if any_seen:
+    if SEEN_MARK in marks:
         extra.append("note: (seen in training): the method's weights were trained on that task's "
                      "sequence; its scores measure memory, not generalisation")
+    if PARTLY_SEEN_MARK in marks:
+        extra.append("note: (partly seen in training): the method's weights were trained on some "
+                     "of the frames that task uses (its record's seen_in_training says which); "
+                     "not comparable with unseen cells")
     if any_untrained:
         extra.append(f"note:{UNTRAINED_MARK}: scored with the method's untrained (random) networks "
                      "(--weights untrained), not trained weights")
