@@ -155,7 +155,8 @@ def write_site(
         def body(reg: _Registry, page: _Page = page, figures: list[tuple[str, str]] = figures) -> str:
             return f"<h1>{_e(page.title)}</h1>" + "".join(
                 _table_section(t, out, reg, figures=figures if i == 0 else ())
-                for i, t in enumerate(page.tables)) + _table2_section(report, page.key)
+                for i, t in enumerate(page.tables)) + _table2_section(report, page.key) + _slam_section(
+                    out, page.key)
 
         emit(page.file, body, page.title, page.tables)
     every = [t for page in pages for t in page.tables]
@@ -446,6 +447,19 @@ def _select(name: str, label: str, values: list[str]) -> str:
 
 def _attrs(attrs: dict[str, str]) -> str:
     return " ".join(f'{k}="{html.escape(v, quote=True)}"' for k, v in attrs.items())
+
+
+def _slam_section(out: Path, key: TableKey | None) -> str:
+    """The loop-closure table the build wrote for this revisit group, if any
+    (`slam_table`: tables/<source>/<stem>-slam.md)."""
+    if key is None:
+        return ""
+    path = out / "tables" / key.source_slug / f"{key.stem}-slam.md"
+    if not path.is_file():
+        return ""
+    from safl_bench.leaderboard.slam_table import slam_html
+
+    return slam_html(path.read_text(encoding="utf-8"))
 
 
 def _e(text: object) -> str:

@@ -109,7 +109,7 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
              "(the drift and closure-noise draws, shared by every method of a seed) [95 % interval "
              "over the seeds]. Threshold: the lowest keeping 100 % precision on the partner "
              "sequence named, deployed here (never chosen on the sequence scored). **Bold**: lowest "
-             "of its column beyond the noise (paired over seeds); ≈: tied for lowest.", ""]
+             "of its column and matching mode beyond the noise (paired over seeds); ≈: tied for lowest.", ""]
     for task, group in sorted(by_task.items()):
         group.sort(key=lambda c: (c.mode != "sequence", c.method))
         first = group[0].results[0]
@@ -118,7 +118,11 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
                   "| Method | Matching | closures true / false | " + " | ".join(
                       f"ATE {b} (m)" for b in BACKENDS) + " |",
                   "|---|---|---:|" + "---:|" * len(BACKENDS)]
-        marks = {b: _marks(group, b) for b in BACKENDS}
+        marks: dict[str, dict[int, str]] = {b: {} for b in BACKENDS}
+        for mode in {c.mode for c in group}:  # ranked within a matching mode, as the revisit table
+            index = [i for i, c in enumerate(group) if c.mode == mode]
+            for b in BACKENDS:
+                marks[b].update({index[k]: m for k, m in _marks([group[i] for i in index], b).items()})
         odometry = group[0].ate(None)
         lines.append("| odometry alone | — | 0 / 0 | "
                      + " | ".join(seed_interval(odometry).format(decimals=2) for _ in BACKENDS) + " |")
@@ -148,3 +152,43 @@ def slam_json(cells: Sequence[SlamCell]) -> str:
             row[f"ate_{b or 'odometry'}"] = [interval.mean, interval.low, interval.high]
         rows.append(row)
     return json.dumps(rows, indent=2, allow_nan=True) + "\n"
+
+
+def slam_html(markdown: str) -> str:
+    """The table's Markdown (`slam_markdown`) as HTML for the web page: headings, paragraphs and
+    pipe tables (the only constructs it writes); bold and ≈ marks kept."""
+    import html
+    import re
+
+    def inline(text: str) -> str:
+        escaped = html.escape(text, quote=True)
+        escaped = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", escaped)
+        parts = escaped.split("`")
+        return "".join(f"<code>{p}</code>" if k % 2 else p for k, p in enumerate(parts))
+
+    out: list[str] = []
+    rows: list[list[str]] = []
+
+    def flush() -> None:
+        if rows:
+            head, *body = rows
+            out.append("<table><thead><tr>" + "".join(f"<th>{inline(c)}</th>" for c in head)
+                       + "</tr></thead><tbody>" + "".join(
+                           "<tr>" + "".join(f"<td>{inline(c)}</td>" for c in r) + "</tr>" for r in body)
+                       + "</tbody></table>")
+            rows.clear()
+
+    for line in markdown.splitlines():
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if not all(set(c) <= set("-:") for c in cells):
+                rows.append(cells)
+            continue
+        flush()
+        if line.startswith("#"):
+            level = min(len(line) - len(line.lstrip("#")) + 1, 4)
+            out.append(f"<h{level}>{inline(line.lstrip('#').strip())}</h{level}>")
+        elif line.strip():
+            out.append(f"<p>{inline(line)}</p>")
+    flush()
+    return "".join(out)

@@ -37,7 +37,7 @@ import numpy as np
 from safl_bench.common.atomic import atomic_write_text
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation import uncertainty
-from safl_bench.evaluation.metrics import CORRECT
+from safl_bench.evaluation.metrics import AMBIGUOUS, CORRECT
 from safl_bench.evaluation.uncertainty import Interval
 from safl_bench.results.records import ResultRecord, record_path, rerun_command, utc_now
 from safl_bench.slam.backend import BACKENDS, solve, trajectory_errors
@@ -203,16 +203,20 @@ def oracle_threshold(confidence: np.ndarray, correct: np.ndarray) -> float | Non
 
 
 def deployed_threshold(record: ResultRecord, mode: str = "sequence") -> float | None:
-    """The oracle threshold of `record` (`oracle_threshold`: the lowest that keeps every
-    accepted match correct there), to be deployed on another cell; None when none does. Reads
-    only confidences and labels, so any record with per-query outcomes will do."""
+    """The threshold at which `record` reaches its recall at 100 % precision (the lowest that
+    accepts no wrong match there, matches in the ambiguous band between the radii counting for
+    neither side, as the metrics count them), to be deployed on another cell; None when none
+    does. Reads only confidences and labels, so any record with per-query outcomes will do."""
     result = record.results.get(mode)
     if result is None or result.queries is None:
         raise DataError(f"{_cell(record)}: the record holds no per-query outcomes of its {mode!r} "
                         f"matches to choose a threshold on; recompute it: {rerun_command(record)}")
     o = result.queries.outcomes()
-    answered = np.isfinite(o.confidence)
-    return oracle_threshold(o.confidence[answered], o.label[answered] == CORRECT)
+    # precision as the revisit metrics count it: a match in the band between the radii is
+    # neither a true nor a false positive (`evaluation.metrics`), so it neither sets nor blocks
+    # the threshold; the threshold is the one behind the record's recall at 100 % precision
+    scored = np.isfinite(o.confidence) & (o.label != AMBIGUOUS)
+    return oracle_threshold(o.confidence[scored], o.label[scored] == CORRECT)
 
 
 def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = None) -> SlamResult:
