@@ -80,6 +80,7 @@ def curve_figure(curves: Mapping[str, Sequence[SlamResult]], path: Path) -> None
                         ms=5, color=line.get_color())
         ax.axhline(first.odometry_ate_m, color="grey", ls="--", lw=0.8, label="odometry alone")
         ax.set_xscale("symlog", linthresh=10)
+        ax.set_xlim(left=0)
         ax.set_title(backend, fontsize=9)
         ax.set_xlabel("closures accepted (x: some false)")
         if k == 0:
