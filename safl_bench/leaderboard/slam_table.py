@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from safl_bench.leaderboard.intervals import BEST, TIED
+from safl_bench.methods.training_data import record_seen, seen_mark
 from safl_bench.results.records import ResultRecord
 from safl_bench.slam.backend import BACKENDS
 from safl_bench.slam.cell import (
@@ -46,6 +47,9 @@ class SlamCell:
     task: str
     mode: str
     results: tuple[SlamResult, ...]  # ordered by SLAM seed
+    #: the record's training mark (`training_data.seen_mark`: weights trained on this task's
+    #: frames); such rows are shown, never ranked, as in the revisit table
+    seen: str = ""
 
     def ate(self, backend: str | None) -> list[float]:
         return [r.ate(backend) for r in self.results]
@@ -70,7 +74,8 @@ def load_cells(records: Sequence[ResultRecord], folder: Path) -> list[SlamCell]:
         for mode, by_seed in sorted(found.items()):
             if set(range(DEFAULT_SLAM_SEEDS)) <= set(by_seed):
                 cells.append(SlamCell(f"{record.method.name}@{record.method.version}", record.task.id,
-                                      mode, tuple(by_seed[s] for s in range(DEFAULT_SLAM_SEEDS))))
+                                      mode, tuple(by_seed[s] for s in range(DEFAULT_SLAM_SEEDS)),
+                                      seen_mark(record_seen(record))))
     return cells
 
 
@@ -109,7 +114,9 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
              "(the drift and closure-noise draws, shared by every method of a seed) [95 % interval "
              "over the seeds]. Threshold: the lowest keeping 100 % precision on the partner "
              "sequence named, deployed here (never chosen on the sequence scored). **Bold**: lowest "
-             "of its column and matching mode beyond the noise (paired over seeds); ≈: tied for lowest.", ""]
+             "of its column and matching mode beyond the noise (paired over seeds); ≈: tied for lowest. A "
+             "row marked as seen in training (its weights were trained on frames of this task, "
+             "the revisit table's mark) is shown, never ranked.", ""]
     for task, group in sorted(by_task.items()):
         group.sort(key=lambda c: (c.mode != "sequence", c.method))
         first = group[0].results[0]
@@ -120,7 +127,7 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
                   "|---|---|---:|" + "---:|" * len(BACKENDS)]
         marks: dict[str, dict[int, str]] = {b: {} for b in BACKENDS}
         for mode in {c.mode for c in group}:  # ranked within a matching mode, as the revisit table
-            index = [i for i, c in enumerate(group) if c.mode == mode]
+            index = [i for i, c in enumerate(group) if c.mode == mode and not c.seen]
             for b in BACKENDS:
                 marks[b].update({index[k]: m for k, m in _marks([group[i] for i in index], b).items()})
         odometry = group[0].ate(None)
@@ -130,7 +137,7 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
             r = cell.results[0]
             estimated = f" ({r.closures_estimated} own pose)" if r.closures_estimated else ""
             failed = [b for b in BACKENDS if any(v != v for v in cell.ate(b))]
-            lines.append(f"| {cell.method} | {MODE_LABEL.get(cell.mode, cell.mode)} | "
+            lines.append(f"| {cell.method}{cell.seen} | {MODE_LABEL.get(cell.mode, cell.mode)} | "
                          f"{r.closures_true} / {r.closures_false}{estimated} | "
                          + " | ".join(_text(cell.ate(b), marks[b].get(i)) for b in BACKENDS) + " |"
                          + (f" (did not converge on some seed: {', '.join(failed)})" if failed else ""))
