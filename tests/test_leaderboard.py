@@ -415,7 +415,8 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
     variants, _ = table2.load_variants(REPO_BOARD / "experiments" / "table2")
     selected, _ = load_records(REPO_BOARD / "selected-records")
     report = build_leaderboard(records, tmp_path, figures=False, preset_records=presets,
-                               selected_records=selected, table2_variants=variants)
+                               selected_records=selected, table2_variants=variants,
+                               records_folder=lambda record: str(REPO_BOARD / "records"))
     _committed(tmp_path, ("tables",))
     # the README's generated blocks are what the same records give (`safl-bench leaderboard`)
     from safl_bench.leaderboard.headline import README_LINK, readme_block
