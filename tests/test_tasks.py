@@ -495,3 +495,21 @@ def test_truth_at_viewpoint_measures_true_places_from_the_noisy_viewpoint(temp_r
     bare = Task(spec, positions=positions, times=np.arange(n) * 0.1)
     with pytest.raises(ConfigError, match="truth_at=viewpoint needs the frames' headings"):
         bare.truth_for(EvaluationConfig(truth_at="viewpoint"))
+
+
+def test_a_task_id_without_its_namespace_is_refused_with_the_full_id_suggested(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from safl_bench.run.runner import resolve_tasks
+
+    with pytest.raises(RegistryError, match=r"unknown task or suite 'BEVKITTI00-BEVPlace-RotQueries-v1'"
+                       r".* Did you mean: SAFL/BEVKITTI00-BEVPlace-RotQueries-v1\?$"):
+        resolve_tasks(["BEVKITTI00-BEVPlace-RotQueries-v1"])
+    with pytest.raises(RegistryError, match=r"Did you mean: SAFL/Synth00-Revisit-v4"):
+        resolve_tasks(["Synth00-Revisit-v4"])
+    with pytest.raises(RegistryError, match=r"Did you mean: SAFL/KITTI00-T5R1\.5-v"):
+        tasks.suite("KITI00-T5R1.5-v1")  # a close match of one
+    with pytest.raises(RegistryError, match=r"^unknown suite 'papr'.*Did you mean: paper\?$"):
+        tasks.suite("papr")
+    assert cli_main(["run", "--method", "sad", "--task", "Synth09-T1R1-v5", "--results", "unused"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("Did you mean: SAFL/Synth09-T1R1-v5?")

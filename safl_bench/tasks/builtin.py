@@ -350,10 +350,36 @@ def suite(name: str, source: str | None = None) -> list[str]:
     from safl_bench.tasks.registry import registry
 
     if name not in SUITES:
-        close = difflib.get_close_matches(name, SUITES, n=1)
-        hint = f" Did you mean: {close[0]}?" if close else ""
-        raise RegistryError(f"unknown suite {name!r}; suites: {', '.join(SUITES)}.{hint}")
+        tasks = _namespaced(name)
+        close = tasks or difflib.get_close_matches(name, SUITES, n=1)
+        what = "task or suite" if tasks else "suite"
+        hint = f" Did you mean: {', '.join(close)}?" if close else ""
+        why = " (task ids carry their namespace)" if tasks else ""
+        raise RegistryError(f"unknown {what} {name!r}{why}; suites: {', '.join(SUITES)}.{hint}")
     if source not in (None, *SOURCE_LABEL):
         raise RegistryError(f"unknown source {source!r}; sources: {', '.join(SOURCE_LABEL)}")
     source = SOURCE_SUITES.get(name, source)
     return [i for i in _BUILTIN[name] if source is None or registry[i].source == source]
+
+
+def _namespaced(name: str) -> list[str]:
+    """The registered task ids that `name` is once their namespace is prefixed (e.g.
+    'BEVKITTI00-BEVPlace-RotQueries-v1' -> SAFL/BEVKITTI00-BEVPlace-RotQueries-v1), else those
+    of the closest such names (at most 3): what a namespace-less task id given where a task id
+    or suite is read (`safl-bench run --task`) meant. Ids stay explicit, as Gymnasium keeps
+    them: this only suggests, it resolves nothing."""
+    import difflib
+
+    from safl_bench.tasks.registry import registry
+    from safl_bench.tasks.spec import make_id
+
+    full: dict[str, list[str]] = {}  # namespace-less id or versionless name -> full ids
+    for spec_ in registry.values():
+        if spec_.namespace:
+            for version in (spec_.version, None):
+                full.setdefault(make_id(None, spec_.name, version), []).append(
+                    make_id(spec_.namespace, spec_.name, version))
+    if name in full:
+        return sorted(set(full[name]))
+    close = difflib.get_close_matches(name, list(full), n=3, cutoff=0.8)
+    return list(dict.fromkeys(i for c in close for i in sorted(set(full[c]))))[:3]
