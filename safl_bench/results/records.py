@@ -404,8 +404,8 @@ def downsample_curve(
 
     Values are rounded to 6 decimals so records stay small and byte-stable.
     """
-    xa = np.asarray(x, dtype=np.float64).ravel()
-    ya = np.asarray(y, dtype=np.float64).ravel()
+    xa: np.ndarray = np.asarray(x, dtype=np.float64).ravel()
+    ya: np.ndarray = np.asarray(y, dtype=np.float64).ravel()
     if xa.shape != ya.shape:
         raise ConfigError(f"curve coordinates differ in length: {xa.size} and {ya.size}")
     if not (np.all(np.isfinite(xa)) and np.all(np.isfinite(ya))):

@@ -362,16 +362,16 @@ class _Town:
         centre_line = rng.random() < 0.75
         for a0, a1 in self.crossings(vertical):
             if centre_line:  # dashed centre marking
-                for a in np.arange(a0 + 1.0, a1 - 3.0, 9.0):
+                for a in np.arange(a0 + 1.0, a1 - 3.0, 9.0).tolist():
                     self.p.ground(*self.rect(vertical, a, a + 3.0, x - 0.08, x + 0.08), 0.0, M.MARKING)
             for side in (-1, 1):
                 kerb = x + side * half
                 walk_mid = x + side * (half + walk / 2)
                 # street lamps with an arm over the road
-                for a in np.arange(a0 + rng.uniform(4, 15), a1 - 3, rng.uniform(26, 38)):
+                for a in np.arange(a0 + rng.uniform(4, 15), a1 - 3, rng.uniform(26, 38)).tolist():
                     pole_c = x + side * (half + 0.5)
                     height = rng.uniform(7.0, 8.5)
-                    u, v = self.point(vertical, float(a), pole_c)
+                    u, v = self.point(vertical, a, pole_c)
                     self.p.disc_solid(u, v, 0.1, height, M.POLE)
                     arm0, arm1 = sorted((pole_c, pole_c - side * 1.6))
                     self.p.floating(*self.rect(vertical, a - 0.15, a + 0.15, arm0, arm1),
@@ -383,7 +383,7 @@ class _Town:
                     self.p.floating(u - 0.35, u + 0.35, v - 0.35, v + 0.35, 2.0, 2.7, M.SIGN)
                 if walk >= 2.5 and rng.random() < 0.55:  # tree-lined street
                     step = rng.uniform(8.5, 13.0)
-                    for a in np.arange(a0 + rng.uniform(3, 8), a1 - 3, step):
+                    for a in np.arange(a0 + rng.uniform(3, 8), a1 - 3, step).tolist():
                         u, v = self.point(vertical, float(a + rng.normal(0, 0.4)), walk_mid)
                         self.tree(u, v, scale=0.85)
                 if rng.random() < 0.85:  # bushes and hedges along the block's edge
@@ -488,8 +488,8 @@ class _Town:
     def block_park(self, u0: float, u1: float, v0: float, v1: float) -> None:
         rng = self.rng
         step = rng.uniform(8, 12)
-        for u in np.arange(u0 + 4, u1 - 3, step):
-            for v in np.arange(v0 + 4, v1 - 3, step):
+        for u in np.arange(u0 + 4, u1 - 3, step).tolist():
+            for v in np.arange(v0 + 4, v1 - 3, step).tolist():
                 if rng.random() < 0.62:
                     self.tree(u + rng.uniform(-2.5, 2.5), v + rng.uniform(-2.5, 2.5))
                 if rng.random() < 0.5:

@@ -126,7 +126,7 @@ def density_counts(
     row = c0 - np.trunc(cx / cell).astype(np.int64)
     col = c0 - np.trunc(cy / cell).astype(np.int64)
     ok = (row >= 0) & (row < size) & (col >= 0) & (col < size)
-    counts = np.bincount(row[ok] * size + col[ok], minlength=size * size).reshape(size, size)
+    counts: np.ndarray = np.bincount(row[ok] * size + col[ok], minlength=size * size).reshape(size, size)
     counts = np.minimum(counts, cap)
     counts[counts < min_count] = 0
     out[:] = counts

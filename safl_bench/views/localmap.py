@@ -202,7 +202,7 @@ class LocalMap(ABC):
 
     def __init__(self, config: MapConfig) -> None:
         self.config = config
-        self.origin = np.zeros(3)
+        self.origin: np.ndarray = np.zeros(3)  # the latest scan's sensor position (world frame)
         self.count = 0  # scans inserted so far
         self._ring: deque[np.ndarray] = deque()
         self._table = HitTable()
