@@ -37,7 +37,7 @@ import numpy as np
 from safl_bench.common.atomic import atomic_write_text
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation import uncertainty
-from safl_bench.evaluation.metrics import AMBIGUOUS, CORRECT
+from safl_bench.evaluation.metrics import AMBIGUOUS, CORRECT, Outcomes
 from safl_bench.evaluation.uncertainty import Interval
 from safl_bench.results.records import ResultRecord, record_path, rerun_command, utc_now
 from safl_bench.slam.backend import BACKENDS, solve, trajectory_errors
@@ -230,33 +230,11 @@ def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = N
     t0 = time.perf_counter()
     if record.task.id != task.id:
         raise ConfigError(f"the record of {_cell(record)} is not of task {task.id}")
-    mode = record.results.get(settings.mode)
-    if mode is None:
-        raise DataError(f"{_cell(record)}: the record has no {settings.mode!r} matching mode "
-                        f"(it has {', '.join(record.results)})")
-    if mode.queries is None:
-        raise DataError(f"{_cell(record)}: the record holds no per-query outcomes (metrics version "
-                        f"{record.metrics_version}); recompute it: {rerun_command(record)}")
-    if mode.queries.match is None:
-        raise DataError(f"{_cell(record)}: the record predates per-query matches (which database "
-                        f"frame each query matched); recompute it: {rerun_command(record)}")
-    poses = poses_of(task)
-    evaluation = record.matcher.get("evaluation", {})
-    trim = int(evaluation.get("trim_queries") or 0)
-    max_frames = evaluation.get("max_frames")
-    n = len(poses) if max_frames is None else min(len(poses), int(max_frames))
-    start = max(task.spec.context_queries, trim)
-    outcomes = mode.queries.outcomes()
-    assert outcomes.match is not None
-    if len(outcomes.match) != n - start - trim:
-        raise DataError(f"{_cell(record)}: {len(outcomes.match)} stored outcomes, expected "
-                        f"{n - start - trim} ({n} frames, queries {start} to {n - trim - 1} scored); "
-                        f"recompute it: {rerun_command(record)}")
-    poses = poses[:n]
-    slam_seed = record.seed if settings.seed is None else int(settings.seed)
+    poses, start, outcomes = stored_matches(record, task, settings.mode)
+    n = len(poses)
+    slam_seed = _slam_seed(record, settings)
+    assert outcomes.match is not None  # stored_matches checked it
     answered = outcomes.match >= 0
-    if (outcomes.match >= n).any():
-        raise DataError(f"{_cell(record)}: a stored match is beyond the task's {n} frames")
     confidence = outcomes.confidence
     correct = outcomes.label == CORRECT
     if settings.threshold_rule is not None:
@@ -276,12 +254,7 @@ def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = N
             raise ConfigError(f"threshold {threshold:g} is outside the confidences of {_cell(record)} "
                               f"({low:g} to {high:g}); pick one in that range")
         rule = "given"
-    accepted = answered & (confidence >= threshold) if threshold is not None else np.zeros_like(answered)
-    index = np.flatnonzero(accepted)
-    own = getattr(outcomes, "relative_pose", None)
-    closures = closure_measurements(poses, start + index, outcomes.match[index], correct[index],
-                                    confidence[index], slam_seed,
-                                    None if own is None else np.asarray(own)[index])
+    closures = accepted_closures(poses, start, outcomes, threshold, slam_seed)
     odometry = simulate_odometry(poses, level, slam_seed)
     reference = trajectory_errors(poses, odometry.trajectory, settings.rpe_delta_m)
     results = []
@@ -312,6 +285,60 @@ def run_slam(record: ResultRecord, task: Task, settings: SlamSettings | None = N
                        "is a straight line; errors in the frame of the first pose"))
 
 
+def stored_matches(record: ResultRecord, task: Task, mode: str) -> tuple[np.ndarray, int, Outcomes]:
+    """What a loop-closure cell reads of `record` (module doc): the task's ground-truth poses
+    (the first ``max_frames`` when the record's evaluation limits them), the pose of the first
+    stored outcome (``start``) and the stored outcomes of `mode`, with their matches. DataError,
+    naming the command that recomputes the record, when it lacks them or they do not fit."""
+    result = record.results.get(mode)
+    if result is None:
+        raise DataError(f"{_cell(record)}: the record has no {mode!r} matching mode "
+                        f"(it has {', '.join(record.results)})")
+    if result.queries is None:
+        raise DataError(f"{_cell(record)}: the record holds no per-query outcomes (metrics version "
+                        f"{record.metrics_version}); recompute it: {rerun_command(record)}")
+    if result.queries.match is None:
+        raise DataError(f"{_cell(record)}: the record predates per-query matches (which database "
+                        f"frame each query matched); recompute it: {rerun_command(record)}")
+    poses = poses_of(task)
+    evaluation = record.matcher.get("evaluation", {})
+    trim = int(evaluation.get("trim_queries") or 0)
+    max_frames = evaluation.get("max_frames")
+    n = len(poses) if max_frames is None else min(len(poses), int(max_frames))
+    start = max(task.spec.context_queries, trim)
+    outcomes = result.queries.outcomes()
+    assert outcomes.match is not None
+    if len(outcomes.match) != n - start - trim:
+        raise DataError(f"{_cell(record)}: {len(outcomes.match)} stored outcomes, expected "
+                        f"{n - start - trim} ({n} frames, queries {start} to {n - trim - 1} scored); "
+                        f"recompute it: {rerun_command(record)}")
+    if (outcomes.match >= n).any():
+        raise DataError(f"{_cell(record)}: a stored match is beyond the task's {n} frames")
+    return poses[:n], start, outcomes
+
+
+def _slam_seed(record: ResultRecord, settings: SlamSettings) -> int:
+    """The seed of the drift and closure-noise draws: the settings' own, else the record's."""
+    return record.seed if settings.seed is None else int(settings.seed)
+
+
+def accepted_closures(poses: np.ndarray, start: int, outcomes: Outcomes, threshold: float | None,
+                      slam_seed: int) -> Closures:
+    """The closures a threshold accepts (module doc): every stored outcome k that matched a
+    frame with a confidence at or above `threshold` (None: none), as a closure from pose
+    ``start + k`` to its matched frame, true where the record labels it correct, measured as
+    `closure_measurements` draws it (the method's own relative pose where it gives one)."""
+    assert outcomes.match is not None
+    answered = outcomes.match >= 0
+    accepted = (answered & (outcomes.confidence >= threshold) if threshold is not None
+                else np.zeros_like(answered))
+    index = np.flatnonzero(accepted)
+    own = getattr(outcomes, "relative_pose", None)
+    return closure_measurements(poses, start + index, outcomes.match[index],
+                                (outcomes.label == CORRECT)[index], outcomes.confidence[index],
+                                slam_seed, None if own is None else np.asarray(own)[index])
+
+
 @dataclass(frozen=True)
 class CellTrajectories:
     """What a cell's picture shows: the true poses, the odometry's trajectory, each back-end's
@@ -328,22 +355,9 @@ def cell_trajectories(record: ResultRecord, task: Task, settings: SlamSettings) 
     """`run_slam` of the cell, with the trajectories it measured (solved once more: a result
     file keeps numbers, not trajectories)."""
     result = run_slam(record, task, settings)
-    outcomes = record.results[settings.mode].queries
-    assert outcomes is not None
-    o = outcomes.outcomes()
-    assert o.match is not None
-    poses = poses_of(task)[: result.n_poses]
-    trim = int(record.matcher.get("evaluation", {}).get("trim_queries") or 0)
-    start = max(task.spec.context_queries, trim)
-    answered = o.match >= 0
-    accepted = (answered & (o.confidence >= result.threshold) if result.threshold is not None
-                else np.zeros_like(answered))
-    index = np.flatnonzero(accepted)
-    own = getattr(o, "relative_pose", None)
-    slam_seed = record.seed if settings.seed is None else int(settings.seed)
-    closures = closure_measurements(poses, start + index, o.match[index], (o.label == CORRECT)[index],
-                                    o.confidence[index], slam_seed,
-                                    None if own is None else np.asarray(own)[index])
+    poses, start, outcomes = stored_matches(record, task, settings.mode)
+    slam_seed = _slam_seed(record, settings)
+    closures = accepted_closures(poses, start, outcomes, result.threshold, slam_seed)
     odometry = simulate_odometry(poses, drift_level(settings.drift), slam_seed)
     optimised = {name: solve(poses[0], odometry, closures, name).trajectory for name in BACKENDS}
     return CellTrajectories(result, poses, odometry.trajectory, optimised, closures)
