@@ -4,10 +4,20 @@
 record's parameters and weights and the matcher with the record's settings (`EvaluationConfig
 .from_dict`), opens the task through the runner (`runner._task`, so every data-source option of
 `safl-bench run` applies), reads the cached views and recomputes only what a record does not
-hold: the descriptors, the difference matrix, the enhanced matrix and the matches. `draw` writes
-the figure:
+hold: the descriptors, the difference matrix, the enhanced matrix and the matches of one
+matching mode (`mode`: the sequence matcher's by default, or single-frame matching).
 
-1. the difference matrix and the contrast-enhanced one side by side (the paper's Figure 4);
+A retrieval method (`safl_bench.methods.retrieval`) has no descriptors and no difference
+matrix, and its record holds everything else: each scored query's matched frame and confidence
+(single-frame mode, the only one it has). Its cell is explained from those without running the
+method again; its matches then go through the same labelling, measures and figure as any
+other's, and the figure says in the place of the matrices that it has none. The sequence mode
+of a retrieval method is a ConfigError (the sequence matcher needs the matrix).
+
+`draw` writes the figure:
+
+1. the difference matrix and the contrast-enhanced one side by side (the paper's Figure 4), or,
+   for a retrieval method, a line saying why there is none;
 2. the database frame each query was matched to against its true one, over the query index;
 3. each query's confidence, correct or wrong, with the most confident wrong match as a line:
    recall at 100 % precision counts only the correct matches above it;
@@ -39,10 +49,17 @@ from safl_bench.evaluation.cell import (
 from safl_bench.evaluation.metrics import AMBIGUOUS, Metrics
 from safl_bench.evaluation.metrics import CORRECT as CORRECT_LABEL
 from safl_bench.evaluation.metrics import WRONG as WRONG_LABEL
-from safl_bench.matching.matcher import MatchResult, enhanced_matrix, match
-from safl_bench.matching.settings import EvaluationConfig
+from safl_bench.matching.matcher import MatcherConfig, MatchResult, enhanced_matrix, match
+from safl_bench.matching.settings import MODES, EvaluationConfig
 from safl_bench.methods.method import Method, method_input
-from safl_bench.results.records import ResultRecord, default_results_dir, load_record, record_path
+from safl_bench.methods.retrieval import NO_SEQUENCE_WHY, is_retrieval
+from safl_bench.results.records import (
+    ResultRecord,
+    default_results_dir,
+    load_record,
+    record_path,
+    rerun_command,
+)
 
 #: Per-query outcome codes of `Explanation.status`.
 CORRECT, WRONG, BAND, NO_MATCH, NOT_SCORED = "correct", "wrong", "ambiguous band", "no match", "not scored"
@@ -53,6 +70,9 @@ _SCORE_WORDS = {
     "inverse": "min(1/S, 1), S the trajectory sum",
 }
 
+#: What answered each query, per matching mode (a retrieval method: its own top candidate).
+_MATCHED_BY = {"sequence": "the sequence matcher", "single_frame": "single-frame matching"}
+
 
 @dataclass
 class Explanation:
@@ -61,9 +81,12 @@ class Explanation:
     record: ResultRecord
     record_path: Path
     config: EvaluationConfig
-    D: np.ndarray  # (Nq, Ndb) the method's differences, lower = more similar
-    enhanced: np.ndarray  # (Nq, Ndb) what the sequence search reads (matching.enhanced_matrix)
-    result: MatchResult  # the sequence matcher's answers, every query
+    mode: str  # the matching mode explained: "sequence" or "single_frame"
+    #: (Nq, Ndb) the method's differences, lower = more similar; None for a retrieval method
+    D: np.ndarray | None
+    #: (Nq, Ndb) what the mode's matcher reads (matching.enhanced_matrix); None with D
+    enhanced: np.ndarray | None
+    result: MatchResult  # the mode's answers, every query (a retrieval method: its record's)
     true_index: np.ndarray  # (Nq,) nearest true database frame, -1 where there is none
     status: np.ndarray  # (Nq,) object: CORRECT, WRONG, BAND, NO_MATCH or NOT_SCORED
     distance_m: np.ndarray  # (Nq,) metres between a query and its matched frame (inf: none)
@@ -72,6 +95,16 @@ class Explanation:
     worst: list[int]  # the most confident wrong matches (query indices), most confident first
     query_views: Any  # top views of the queries and of the database, for the figure
     database_views: Any
+
+    @property
+    def retrieval(self) -> bool:
+        """A retrieval method's cell: no matrices, its matches read from its record."""
+        return self.record.method.kind == "retrieval"
+
+    @property
+    def matcher(self) -> MatcherConfig:
+        """The settings of the explained mode's matcher."""
+        return self.config.matcher(self.mode)
 
     @property
     def confidence(self) -> np.ndarray:
@@ -84,7 +117,7 @@ class Explanation:
 
     @property
     def recorded_recall(self) -> float | None:
-        return self.record.results["sequence"].metrics.recall_at_100_precision
+        return self.record.results[self.mode].metrics.recall_at_100_precision
 
 
 def run_command(method: str, task_id: str, *, seed: int | None = None,
@@ -128,10 +161,13 @@ def rebuild_method(record: ResultRecord) -> Method:
     return method
 
 
-def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explanation:
+def explain(method: str, task_id: str, options: Any, *, top: int = 4,
+            mode: str | None = None) -> Explanation:
     """Recompute one cell from its record (see the module docstring). `options` is a
-    `runner.RunOptions` (results directory, seed, data-source options, progress); a cell
-    without a record is a DataError whose message is the run command that makes it."""
+    `runner.RunOptions` (results directory, seed, data-source options, progress); `mode` the
+    matching mode to explain (None: "sequence", or "single_frame" for a retrieval method). A
+    cell without a record is a DataError whose message is the run command that makes it; the
+    sequence mode of a retrieval method is a ConfigError."""
     from safl_bench.methods.method import method_class, method_selector, resolve_method
     from safl_bench.run.runner import _task
     from safl_bench.tasks.registry import runnable_spec
@@ -139,6 +175,14 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
     registered = runnable_spec(task_id)  # an old synthetic task cannot be recomputed
     seed = registered.seed if options.seed is None else int(options.seed)
     cls = method_class(resolve_method(method, registered.source))  # what `run` ran there
+    retrieval = is_retrieval(cls)
+    mode = mode or ("single_frame" if retrieval else "sequence")
+    if mode not in MODES:
+        raise ConfigError(f"unknown matching mode {mode!r}; modes: {', '.join(MODES)}")
+    if retrieval and mode == "sequence":
+        raise ConfigError(f"the sequence matcher does not apply to retrieval methods such as "
+                          f"{cls.name}@{cls.version} ({NO_SEQUENCE_WHY}); explain its "
+                          "single_frame matches")
     path = record_path(options.results_dir, cls.name, cls.version, registered.id, seed)
     if not path.is_file():
         given = None if options.results_dir == default_results_dir() else options.results_dir
@@ -149,9 +193,10 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
                         f"{options.results_dir}; make it with: {command}")
     record = load_record(path)
     config = EvaluationConfig.from_dict(record.matcher)
-    described = rebuild_method(record)
+    matcher = config.matcher(mode)
+    described = None if retrieval else rebuild_method(record)
     task = _task(registered, seed, options, options.progress, described)
-    kind = described.input_kind
+    kind = "topview" if described is None else described.input_kind
     task.prepare(list(dict.fromkeys([kind, "topview"])))
     queries, database, truth = task.queries(kind), task.database(kind), task.truth_for(config)
     q_top, db_top = task.queries("topview"), task.database("topview")
@@ -159,14 +204,18 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
         n = config.max_frames
         queries, database, q_top, db_top = queries[:n], database[:n], q_top[:n], db_top[:n]
         truth = subset_truth(truth, slice(0, n), slice(0, n))
-    D, _, _ = difference_matrix(described, method_input(described, queries),
-                                method_input(described, database), config.distance)
-    limit = truth.db_limit() if task.spec.protocol == "revisit" else None
-    result = match(D, config.sequence, db_limit=limit)
-    enhanced = enhanced_matrix(D, config.sequence)
-
-    nq = len(D)
+    nq = len(q_top)
     scored = scored_queries(nq, config.trim_queries, task.spec.context_queries)
+    D = enhanced = None
+    if described is None:
+        result = recorded_result(record, mode, nq, scored, matcher)
+    else:
+        D, _, _ = difference_matrix(described, method_input(described, queries),
+                                    method_input(described, database), config.distance)
+        limit = truth.db_limit() if task.spec.protocol == "revisit" else None
+        result = match(D, matcher, db_limit=limit)
+        enhanced = enhanced_matrix(D, matcher)
+
     part = subset_truth(truth, scored, slice(None)) if scored != slice(0, nq) else truth
     outcomes = match_outcomes(truth, result)  # every query; the metrics see the scored ones
     metrics = score_matches(part, subset_result(result, scored))
@@ -189,11 +238,41 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4) -> Explana
             true_index[i] = int(near[np.argmin(truth.distances(i, near))])
     wrong = np.flatnonzero(status == WRONG)
     order = wrong[np.argsort(-result.confidence[wrong], kind="stable")]
-    return Explanation(record=record, record_path=path, config=config, D=D, enhanced=enhanced,
-                       result=result, true_index=true_index, status=status, distance_m=distance,
+    return Explanation(record=record, record_path=path, config=config, mode=mode, D=D,
+                       enhanced=enhanced, result=result, true_index=true_index, status=status, distance_m=distance,
                        tp_radius_m=float(truth.tp_radius),
                        metrics=metrics, worst=[int(i) for i in order[:top]],
                        query_views=q_top, database_views=db_top)
+
+
+def recorded_result(record: ResultRecord, mode: str, n_queries: int, scored: slice,
+                    config: MatcherConfig) -> MatchResult:
+    """The matches a record holds for `mode` as a `MatchResult` over all `n_queries`: each
+    scored query's stored matched frame, its confidence as the score (negated: lower = better,
+    as `evaluation.cell.top_candidate` makes it), and no match for the queries outside `scored`
+    (a record stores only those). DataError, naming the command that recomputes the record,
+    when it holds no such matches or not one per scored query."""
+    held = record.results.get(mode)
+    stored = None if held is None else held.queries
+    if stored is None or stored.match is None:
+        raise DataError(f"the record of {record.method.name}@{record.method.version} on "
+                        f"{record.task.id} seed {record.seed} holds no per-query {mode} matches; "
+                        f"recompute it: {rerun_command(record)}")
+    outcomes = stored.outcomes()
+    assert outcomes.match is not None
+    n_scored = scored.stop - scored.start
+    if len(outcomes.match) != n_scored:
+        raise DataError(f"the record of {record.method.name}@{record.method.version} on "
+                        f"{record.task.id} holds {len(outcomes.match)} query outcomes, the task "
+                        f"scores {n_scored}; recompute it: {rerun_command(record)}")
+    index = np.full(n_queries, -1, np.int64)
+    index[scored] = outcomes.match
+    found = index >= 0
+    score = np.full(n_queries, np.inf)
+    score[scored] = np.where(outcomes.match >= 0, -outcomes.confidence, np.inf)
+    return MatchResult(index=index, score=score, best_s=score.copy(),
+                       velocity=np.full(n_queries, np.nan), n_terms=found.astype(np.int64),
+                       complete=found.copy(), config=config)
 
 
 def _source_flags(options: Any) -> dict[str, Any]:
@@ -205,13 +284,20 @@ def _source_flags(options: Any) -> dict[str, Any]:
     return flags
 
 
-def summary(ex: Explanation) -> str:
-    """A few lines for the terminal: the metric, and which wrong matches set it."""
+def _matched_by(ex: Explanation) -> str:
+    """What answered the queries, with the record's matcher settings (presets.label)."""
     from safl_bench.matching.presets import label
 
+    if ex.retrieval:
+        return "its own top candidates (single-frame, read from its record)"
+    return f"{_MATCHED_BY[ex.mode]}, matcher {label(ex.config)}"
+
+
+def summary(ex: Explanation) -> str:
+    """A few lines for the terminal: the metric, and which wrong matches set it."""
     rec = ex.record
-    lines = [f"{rec.method.name}@{rec.method.version} on {rec.task.id} seed {rec.seed}, matcher "
-             f"{label(ex.config)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)} "
+    lines = [f"{rec.method.name}@{rec.method.version} on {rec.task.id} seed {rec.seed}, "
+             f"{_matched_by(ex)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)} "
              f"(record: {_pct(ex.recorded_recall)}), {int((ex.status == CORRECT).sum())} of "
              f"{int((ex.status != NOT_SCORED).sum())} scored queries matched correctly"]
     if ex.threshold is not None:
@@ -248,40 +334,50 @@ def draw(ex: Explanation, out: str | Path, *, dpi: int = 80) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from safl_bench.matching.presets import label
-
     out = Path(out)
-    rec, cfg = ex.record, ex.config.sequence
-    nq, ndb = ex.D.shape
+    rec, cfg = ex.record, ex.matcher
+    nq, ndb = len(ex.status), len(ex.database_views)
     n_rows = max(1, (len(ex.worst) + 1) // 2)
+    top_height = 6.2 if ex.D is not None else 1.0  # a line instead of the matrices
     with matplotlib.style.context("default"):
-        fig = Figure(figsize=(16, 17 + 2.9 * n_rows), dpi=dpi)
+        fig = Figure(figsize=(16, 17 - (6.2 - top_height) + 2.9 * n_rows), dpi=dpi)
         FigureCanvasAgg(fig)
-        grid = fig.add_gridspec(4 + n_rows, 6, height_ratios=[6.2, 3.4, 3.4, 0.35] + [2.9] * n_rows,
+        grid = fig.add_gridspec(4 + n_rows, 6,
+                                height_ratios=[top_height, 3.4, 3.4, 0.35] + [2.9] * n_rows,
                                 hspace=0.75, wspace=0.35, left=0.06, right=0.97, top=0.93, bottom=0.02)
         fig.suptitle(
-            f"{rec.method.name}@{rec.method.version} on {rec.task.id} (seed {rec.seed}), matcher "
-            f"{label(ex.config)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)}, "
+            f"{rec.method.name}@{rec.method.version} on {rec.task.id} (seed {rec.seed}), "
+            f"{_matched_by(ex)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)}, "
             f"ROC AUC {_auc(ex.metrics)}\nrecord {ex.record_path}", fontsize=13)
 
-        # 1. the difference matrix and the enhanced one (paper Fig. 4)
-        if cfg.enhance_window:
+        # 1. the difference matrix and the enhanced one (paper Fig. 4), or why there are none
+        if ex.D is None or ex.enhanced is None:
+            ax = fig.add_subplot(grid[0, :])
+            ax.axis("off")
+            ax.text(0.5, 0.5, f"No difference matrix, so no enhanced one: {rec.method.name} is a "
+                    "retrieval method, which answers each query with ranked, verified candidates, "
+                    "not a distance to every database frame.\nThe panels below are drawn from its "
+                    "record: each scored query's top candidate and the method's own confidence.",
+                    ha="center", va="center", fontsize=12, transform=ax.transAxes,
+                    bbox={"boxstyle": "round", "facecolor": "0.95", "edgecolor": "0.6"})
+        elif cfg.enhance_window:
             how = (f"Eq. 5 over {cfg.enhance_window} database frames, {cfg.enhance_mode}"
                    + ("; shifted to a minimum of 0" if cfg.shift else "; not shifted"))
         else:
             how = "no enhancement (enhance_window=0)" + ("; shifted to 0" if cfg.shift else "")
-        top_row = grid[0, :].subgridspec(1, 2, wspace=0.22)
-        for col, (matrix, title) in enumerate([
-                (ex.D, f"Difference matrix D ({rec.method.name}'s distance)"),
-                (ex.enhanced, f"Enhanced matrix: {how}")]):
-            ax = fig.add_subplot(top_row[0, col])
-            lo, hi = _matrix_limits(matrix)
-            image = ax.imshow(matrix, cmap="gray", vmin=lo, vmax=hi, aspect="auto",
-                              interpolation="nearest")
-            ax.set_title(title + "\ndarker = more similar", fontsize=11)
-            ax.set_xlabel("database frame")
-            ax.set_ylabel("query")
-            fig.colorbar(image, ax=ax, fraction=0.04, pad=0.02)
+        if ex.D is not None and ex.enhanced is not None:
+            top_row = grid[0, :].subgridspec(1, 2, wspace=0.22)
+            for col, (matrix, title) in enumerate([
+                    (ex.D, f"Difference matrix D ({rec.method.name}'s distance)"),
+                    (ex.enhanced, f"Enhanced matrix: {how}")]):
+                ax = fig.add_subplot(top_row[0, col])
+                lo, hi = _matrix_limits(matrix)
+                image = ax.imshow(matrix, cmap="gray", vmin=lo, vmax=hi, aspect="auto",
+                                  interpolation="nearest")
+                ax.set_title(title + "\ndarker = more similar", fontsize=11)
+                ax.set_xlabel("database frame")
+                ax.set_ylabel("query")
+                fig.colorbar(image, ax=ax, fraction=0.04, pad=0.02)
 
         # 2. matched against true database frame
         q = np.arange(nq)
@@ -300,7 +396,8 @@ def draw(ex: Explanation, out: str | Path, *, dpi: int = 80) -> Path:
                         xytext=(4, 4), fontsize=10, color="tab:red", weight="bold")
         _shade_unscored(ax, ex)
         n_none = int((ex.status == NO_MATCH).sum())
-        ax.set_title("Database frame matched to each query by the sequence matcher, against the "
+        by = "the method (its top candidate)" if ex.retrieval else _MATCHED_BY[ex.mode]
+        ax.set_title(f"Database frame matched to each query by {by}, against the "
                      "true one" + (f" ({n_none} scored queries got no match)" if n_none else ""),
                      fontsize=11)
         ax.set_xlabel("query")
@@ -328,8 +425,9 @@ def draw(ex: Explanation, out: str | Path, *, dpi: int = 80) -> Path:
                             fontsize=10, color="tab:red", weight="bold")
         _shade_unscored(ax, ex)
         _shade_short(ax, ex)
-        ax.set_title(f"Confidence of each query's match (score={cfg.score}: "
-                     f"{_SCORE_WORDS.get(cfg.score, cfg.score)}); higher = accepted first",
+        score = ("the method's own confidence, from its record" if ex.retrieval else
+                 f"score={cfg.score}: {_SCORE_WORDS.get(cfg.score, cfg.score)}")
+        ax.set_title(f"Confidence of each query's match ({score}); higher = accepted first",
                      fontsize=11)
         ax.set_xlabel("query")
         ax.set_ylabel("confidence")

@@ -13,7 +13,9 @@ HELP = (
     "matrix from the cached views with the record's method and matcher settings and draw one PNG: "
     "the difference and enhanced matrices (the paper's Figure 4), the matched against the true "
     "database frame of every query, each query's confidence (correct or wrong), and the most "
-    "confident wrong matches as top views (query, wrong match, true match)."
+    "confident wrong matches as top views (query, wrong match, true match). A retrieval method "
+    "(map_closures) has no difference matrix: its figure says so and draws the rest from the "
+    "matches its record holds, without running the method."
 )
 
 
@@ -27,6 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", metavar="PNG",
                         help="the figure (default: explain-<method>-<task>-seed<N>.png here; <method> is "
                              "name@VERSION for a version that is not the newest)")
+    parser.add_argument("--mode", choices=["sequence", "single_frame"],
+                        help="whose matches to explain (default: the sequence matcher's, or "
+                             "single_frame for a retrieval method such as map_closures, whose "
+                             "records hold only those)")
     parser.add_argument("--top", type=int, default=4, metavar="N",
                         help="how many of the most confident wrong matches to show (default 4)")
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root (KITTI tasks)")
@@ -54,11 +60,12 @@ def main(args: argparse.Namespace) -> int:
         bev_resolution_m=args.bev_resolution,
         progress=not args.quiet,
     )
-    ex = explain(args.method, args.task, options, top=args.top)
+    ex = explain(args.method, args.task, options, top=args.top, mode=args.mode)
     task_id = spec(args.task).id
     method = method_selector(ex.record.method.name, ex.record.method.version)
+    shown = "-single_frame" if ex.mode == "single_frame" and not ex.retrieval else ""
     out = Path(args.out) if args.out else Path(
-        f"explain-{method}-{task_id.replace('/', '_')}-seed{ex.record.seed}.png")
+        f"explain-{method}-{task_id.replace('/', '_')}-seed{ex.record.seed}{shown}.png")
     draw(ex, out)
     print(summary(ex))
     print(f"figure: {out}")
