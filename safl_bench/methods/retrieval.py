@@ -11,7 +11,7 @@ any method that checks candidates geometrically work the same way)::
         name, version = "my_retrieval", "1"
         def retrieve(self, queries, database, *, db_limit=None, same_frames=False):
             ...                                    # per query: candidates + confidences
-            return Retrieval.from_lists(index, confidence, n_database=len(database))
+            return Retrieval.from_lists(index, confidence)
 
 Choices, with the reason for each:
 
