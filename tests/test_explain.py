@@ -35,7 +35,11 @@ def test_explain_recomputes_the_record_and_writes_a_png(tiny_task, kitti_root, t
     outcome = runner.run_cell(make_method("sad"), tiny_task, options(kitti_root, tmp_path))
     ex = explain.explain("sad", tiny_task, options(kitti_root, tmp_path), top=2)
     assert ex.record_path == outcome.path and ex.D.shape == (12, 12)
-    np.testing.assert_array_equal(ex.enhanced, matching.enhanced_matrix(ex.D, ex.config.sequence))
+    window = outcome.record.matcher["enhancement"]["window"]  # the dip rule's, recorded
+    np.testing.assert_array_equal(ex.enhanced, matching.enhanced_matrix(
+        ex.D, ex.config.sequence, enhance_window=window))
+    assert ex.result.enhance_window == window and ex.true_rank is not None
+    assert "contrast enhancement (window" in explain.summary(ex)
     assert ex.metrics.recall_at_100 == pytest.approx(ex.recorded_recall)
     assert len(ex.worst) <= 2 and all(ex.status[i] == explain.WRONG for i in ex.worst)
     conf = ex.confidence

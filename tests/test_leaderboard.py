@@ -149,7 +149,7 @@ def test_records_predating_a_setting_share_the_configuration_of_its_default() ->
         return dataclasses.replace(make_record("a", seed=seed), matcher=matcher)
 
     notes = _table([with_matcher(0, before), with_matcher(1, now)]).notes
-    assert any(n.startswith("Matcher preset (all rows): paper;") for n in notes)
+    assert any(n.startswith("Matcher preset (all rows): paper-r10;") for n in notes)
     assert not any("differ" in n for n in notes)
     notes = _table([with_matcher(0, before), with_matcher(1, other)]).notes
     assert any(n.startswith("Matcher settings differ between records (2 configurations") for n in notes)

@@ -44,37 +44,62 @@ def authors(**changes: object) -> MatcherConfig:
 # --------------------------------------------------------------------------- paper
 
 
-def test_paper_preset_is_the_old_defaults() -> None:
-    paper = matcher_presets.get("paper").config
-    assert paper == EvaluationConfig()
-    assert paper.sequence == MatcherConfig()
-    recorded = paper.to_dict()
+def test_paper_r10_preset_is_the_old_defaults() -> None:
+    old = matcher_presets.get("paper-r10").config
+    assert old == EvaluationConfig()
+    assert old.sequence == MatcherConfig()
+    recorded = old.to_dict()
     assert {k: recorded["sequence"][k] for k in OLD_DEFAULTS} == OLD_DEFAULTS
     assert {k: recorded["single_frame"][k] for k in OLD_SINGLE} == OLD_SINGLE
-    assert recorded["sequence"]["preset"] == "paper"
+    assert recorded["sequence"]["preset"] == "paper-r10"
+    assert recorded["sequence"]["enhance_rule"] == "fixed"
     assert recorded["evaluation"] == {"max_frames": None, "trim_queries": 0, "distance": "method",
                                       "truth_at": "frame"}
-    assert paper.sequence.velocities().tolist() == [0.8, 0.9, 1.0, 1.1]
+    assert old.sequence.velocities().tolist() == [0.8, 0.9, 1.0, 1.1]
 
 
-def test_records_made_before_the_presets_read_as_paper() -> None:
+def test_paper_preset_is_paper_r10_with_the_dip_rule() -> None:
+    paper = matcher_presets.get("paper").config
+    assert matcher_presets.DEFAULT == "paper"
+    assert dataclasses.replace(paper.sequence, enhance_rule="fixed", enhance_window=10,
+                               preset="paper-r10") == MatcherConfig()
+    assert paper.sequence.needs_window and not paper.single_frame.needs_window
+    assert matcher_presets.label(paper) == "paper"
+
+
+def test_records_made_before_the_rule_read_as_paper_r10() -> None:
+    """A record made as "paper" before the rule (or before the presets) is the fixed window:
+    it is read as paper-r10 and never as today's paper."""
     old = {"sequence": OLD_DEFAULTS, "single_frame": OLD_SINGLE}
-    want = EvaluationConfig().to_dict()
-    assert old != want  # the new keys are there ...
-    assert same_settings(old, want)  # ... and an old record still holds the same settings
-    assert matcher_presets.label(old) == "paper"
+    named = {"sequence": {**OLD_DEFAULTS, "preset": "paper"},
+             "single_frame": {**OLD_SINGLE, "preset": "paper"}}
+    for recorded in (old, named):
+        assert same_settings(recorded, EvaluationConfig().to_dict())
+        assert not same_settings(recorded, matcher_presets.get("paper").config.to_dict())
+        assert matcher_presets.label(recorded) == "paper-r10"
     changed = {"sequence": {**OLD_DEFAULTS, "enhance_window": 0}, "single_frame": OLD_SINGLE}
-    assert not same_settings(changed, want)
-    assert matcher_presets.label(changed) == "paper+enhance_window=0"
-    assert not same_settings({"ds": 10}, want) and matcher_presets.label({"ds": 10}) == "unreadable"
+    assert not same_settings(changed, EvaluationConfig().to_dict())
+    assert matcher_presets.label(changed) == "paper-r10+enhance_window=0"
+    assert not same_settings({"ds": 10}, EvaluationConfig().to_dict())
+    assert matcher_presets.label({"ds": 10}) == "unreadable"
+    new = matcher_presets.get("paper").config.to_dict()
+    assert EvaluationConfig.from_dict(new) == matcher_presets.get("paper").config
 
 
-def test_paper_matches_are_those_of_a_default_config() -> None:
+def test_paper_matches_are_those_of_the_window_it_is_given() -> None:
     D = np.random.default_rng(3).random((40, 50)).astype(np.float32)
-    a = matching.match(D, matcher_presets.get("paper").config.sequence, keep_S=True)
-    b = matching.match(D, MatcherConfig(), keep_S=True)
+    paper = matcher_presets.get("paper").config.sequence
+    a = matching.match(D, paper, keep_S=True, enhance_window=24)
+    b = matching.match(D, MatcherConfig(enhance_window=24), keep_S=True)
     for name in ("index", "score", "best_s", "velocity", "n_terms", "S"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert a.enhance_window == 24
+    with pytest.raises(ConfigError, match="takes its window from the database"):
+        matching.match(D, paper)
+    with pytest.raises(ConfigError, match="must be 0"):
+        dataclasses.replace(paper, enhance_window=10)
+    with pytest.raises(ConfigError, match="fixed window of 10"):
+        matching.match(D, MatcherConfig(), enhance_window=24)
 
 
 # --------------------------------------------------------------------------- authors quirks
@@ -253,7 +278,7 @@ def test_unknown_preset_says_did_you_mean_and_lists_them() -> None:
         matcher_presets.configure("author")
     message = str(err.value)
     assert "did you mean 'authors'?" in message
-    assert "paper, authors, authors-sad, authors-2018, openseqslam" in message
+    assert "paper, paper-r10, authors, authors-sad, authors-2018, openseqslam" in message
     assert "\n" not in message
     with pytest.raises(ConfigError, match=r"--matcher: unknown setting\(s\) \['speed'\]; valid: \["):
         matcher_presets.configure("paper", {"speed": 2})
@@ -281,7 +306,7 @@ def test_cli_list_matchers(capsys: pytest.CaptureFixture[str]) -> None:
     assert "inverse *" in out and "floor_start *" in out
     assert main(["list", "matchers", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"paper", "authors", "authors-sad", "authors-2018", "openseqslam"}
+    assert set(data) == {"paper", "paper-r10", "authors", "authors-sad", "authors-2018", "openseqslam"}
     assert data["authors"]["settings"]["capped_match"] == 1
     assert set(data["paper"]["settings"]) == {*matcher_presets.SETTINGS, "preset"}
     for preset in data.values():  # every value cites where it comes from

@@ -342,7 +342,7 @@ def test_settings_at_their_limits_are_accepted() -> None:
 def test_settings_round_trip_and_unknown_ones() -> None:
     cfg = MatcherConfig(ds=3, score="inverse", capped_match=1, preset="authors")
     d = cfg.to_dict()
-    assert d["ds"] == 3 and d["capped_match"] == 1 and len(d) == 18
+    assert d["ds"] == 3 and d["capped_match"] == 1 and len(d) == 19
     assert MatcherConfig.from_dict(d) == cfg
     assert MatcherConfig.from_dict({"ds": 4}) == MatcherConfig(ds=4)  # older records
     with pytest.raises(ConfigError, match=r"^matcher settings: unknown setting\(s\) \['a', 'z'\]"):

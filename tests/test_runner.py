@@ -111,7 +111,9 @@ def test_cli_run_prints_the_table(tiny_tasks, kitti_root, tmp_path, capsys):
     assert "R@100%P" in out and tiny_tasks[0] in out and "computed" in out
     record = json.loads(next(tmp_path.rglob("seed-0.json")).read_text())
     assert record["method"]["name"] == "sad"
-    assert record["matcher"]["sequence"]["enhance_window"] == 10  # the default: Table I + OpenSeqSLAM
+    # the default preset: Table I, the window from the database's self-difference dip
+    assert record["matcher"]["sequence"]["enhance_rule"] == "dip"
+    assert record["matcher"]["enhancement"]["window"] >= 2
 
 
 def test_cli_run_matcher_settings_are_used_and_recorded(tiny_tasks, kitti_root, tmp_path, capsys):
@@ -193,9 +195,9 @@ def test_summary_names_the_preset_and_explains_zeros_of_mostly_correct_cells(tmp
 
     from record_factory import make_record
 
-    from safl_bench.evaluation import EvaluationConfig
+    from safl_bench import matcher_presets
 
-    paper = EvaluationConfig().to_dict()
+    paper = matcher_presets.get("paper").config.to_dict()
     zero = replace(make_record("sad", recall=0.0, recall_at_1=0.9, source_kind="bev",
                                source_label="KITTI top-view images"), matcher=paper)
     fine = replace(make_record("sad", condition="T5R1", recall=0.5, recall_at_1=0.9), matcher=paper)

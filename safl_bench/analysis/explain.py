@@ -39,18 +39,21 @@ import numpy as np
 
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation.cell import (
-    difference_matrix,
+    choose_window,
+    compare,
+    describe_pair,
     match_outcomes,
     score_matches,
     scored_queries,
     subset_result,
     subset_truth,
 )
-from safl_bench.evaluation.metrics import AMBIGUOUS, Metrics
+from safl_bench.evaluation.metrics import AMBIGUOUS, Metrics, true_place_ranks
 from safl_bench.evaluation.metrics import CORRECT as CORRECT_LABEL
 from safl_bench.evaluation.metrics import WRONG as WRONG_LABEL
 from safl_bench.matching.matcher import MatcherConfig, MatchResult, enhanced_matrix, match
 from safl_bench.matching.settings import MODES, EvaluationConfig
+from safl_bench.matching.window import RECORD_KEY
 from safl_bench.methods.method import Method, method_input
 from safl_bench.methods.retrieval import NO_SEQUENCE_WHY, is_retrieval
 from safl_bench.results.records import (
@@ -95,6 +98,10 @@ class Explanation:
     worst: list[int]  # the most confident wrong matches (query indices), most confident first
     query_views: Any  # top views of the queries and of the database, for the figure
     database_views: Any
+    #: (before, after): per query, the 1-based rank of its nearest true frame in its row of D
+    #: and of the enhanced matrix the matcher reads (0: no true place, or not scored); None
+    #: for a retrieval method
+    true_rank: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def retrieval(self) -> bool:
@@ -207,14 +214,24 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4,
     nq = len(q_top)
     scored = scored_queries(nq, config.trim_queries, task.spec.context_queries)
     D = enhanced = None
+    ranks: tuple[np.ndarray, np.ndarray] | None = None
     if described is None:
         result = recorded_result(record, mode, nq, scored, matcher)
     else:
-        D, _, _ = difference_matrix(described, method_input(described, queries),
-                                    method_input(described, database), config.distance)
+        d_q, d_db, _, _ = describe_pair(described, method_input(described, queries),
+                                        method_input(described, database))
+        D = compare(described, d_q, d_db, config.distance)
+        window = None
+        if matcher.needs_window:  # the record's choice; recomputed for a record without one
+            chosen = record.matcher.get(RECORD_KEY) or {}
+            window = chosen.get("window") or choose_window(described, np.asarray(d_db),
+                                                           config.distance).window
         limit = truth.db_limit() if task.spec.protocol == "revisit" else None
-        result = match(D, matcher, db_limit=limit)
-        enhanced = enhanced_matrix(D, matcher)
+        result = match(D, matcher, db_limit=limit, enhance_window=window)
+        enhanced = enhanced_matrix(D, matcher, enhance_window=window)
+        true_lists = [truth.true_matches(i) for i in range(nq)]
+        ranks = (true_place_ranks(D, true_lists, db_limit=limit, dtype=matcher.dtype),
+                 true_place_ranks(enhanced, true_lists, db_limit=limit, dtype=matcher.dtype))
 
     part = subset_truth(truth, scored, slice(None)) if scored != slice(0, nq) else truth
     outcomes = match_outcomes(truth, result)  # every query; the metrics see the scored ones
@@ -242,7 +259,8 @@ def explain(method: str, task_id: str, options: Any, *, top: int = 4,
                        enhanced=enhanced, result=result, true_index=true_index, status=status, distance_m=distance,
                        tp_radius_m=float(truth.tp_radius),
                        metrics=metrics, worst=[int(i) for i in order[:top]],
-                       query_views=q_top, database_views=db_top)
+                       query_views=q_top, database_views=db_top,
+                       true_rank=None if ranks is None else (ranks[0] * inside, ranks[1] * inside))
 
 
 def recorded_result(record: ResultRecord, mode: str, n_queries: int, scored: slice,
@@ -300,6 +318,9 @@ def summary(ex: Explanation) -> str:
              f"{_matched_by(ex)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)} "
              f"(record: {_pct(ex.recorded_recall)}), {int((ex.status == CORRECT).sum())} of "
              f"{int((ex.status != NOT_SCORED).sum())} scored queries matched correctly"]
+    enhancement = enhancement_line(ex)
+    if enhancement:
+        lines.append(enhancement)
     if ex.threshold is not None:
         above = int(((ex.status == CORRECT) & (ex.confidence > ex.threshold)).sum())
         lines.append(f"the most confident wrong match outranks all but {above} correct ones:")
@@ -308,6 +329,26 @@ def summary(ex: Explanation) -> str:
                          f"({_metres(ex.distance_m[q])} away; true frame "
                          f"{_frame(ex.true_index[q])}), confidence {ex.confidence[q]:.4g}")
     return "\n".join(lines)
+
+
+def enhancement_line(ex: Explanation) -> str:
+    """What contrast enhancement (Eq. 5) did to the true frame's rank in its row: before (the
+    method's differences) and after (the matrix the matcher reads), over the scored queries
+    with a true place; '' where there is no matrix or no such query."""
+    if ex.true_rank is None:
+        return ""
+    before, after = ex.true_rank
+    has = before > 0
+    n = int(has.sum())
+    if not n:
+        return ""
+    window = ex.result.enhance_window
+    how = ("off" if not window else
+           f"window {window} frames" + (", dip rule" if ex.matcher.needs_window else ""))
+    return (f"contrast enhancement ({how}): the true frame's median rank in its row "
+            f"{np.median(before[has]):g} -> {np.median(after[has]):g}, first in its row for "
+            f"{int((before[has] == 1).sum())} -> {int((after[has] == 1).sum())} of the {n} "
+            "scored queries with a true place (before -> after enhancement)")
 
 
 def _pct(value: float | None) -> str:

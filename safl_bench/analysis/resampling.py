@@ -45,6 +45,7 @@ from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation.cell import evaluate_method
 from safl_bench.evaluation.metrics import Outcomes
 from safl_bench.evaluation.uncertainty import Interval, Sample, sample
+from safl_bench.matching.presets import default_config
 from safl_bench.matching.settings import MODES, EvaluationConfig
 from safl_bench.methods.method import Method, method_input
 from safl_bench.run.runner import RunOptions, _task, method_info
@@ -171,7 +172,7 @@ class Experiment:
 
     tasks: tuple[str, ...]
     seeds: tuple[int, ...]
-    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+    evaluation: EvaluationConfig = field(default_factory=default_config)
     mode: str = "sequence"
     kitti_root: str | None = None
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import time
+import weakref
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -48,6 +49,7 @@ from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they wer
     EvaluationConfig,
     same_settings,
 )
+from safl_bench.matching.window import WindowChoice, dip_window, sample_rows
 from safl_bench.methods.distance import euclidean
 from safl_bench.methods.method import Method
 from safl_bench.methods.retrieval import NOT_RETRIEVED, Retrieval, RetrievalMethod, is_retrieval
@@ -67,6 +69,8 @@ class Evaluation:
     #: retrieval methods: the method's own seconds per query (`Retrieval.seconds`; a method that
     #: does not time its queries: its whole call's time spread evenly); None for descriptor ones
     query_s: np.ndarray | None = None
+    #: the ``dip`` rule's enhancement window for this cell's database (None: a fixed window)
+    window: WindowChoice | None = None
 
 
 def match_outcomes(truth: GroundTruth, result: MatchResult,
@@ -146,23 +150,61 @@ def describe_database(method: Method, database: Any,
 _MEMO_LIMIT = 8
 
 
+def compare(method: Method, a: np.ndarray, b: np.ndarray, distance: str = "method") -> np.ndarray:
+    """The difference of descriptors `a` (rows) to `b` (columns): `Method.distance` for
+    `distance` "method", plain L2 for "euclidean"; a DataError when the method's distance
+    returns another shape."""
+    D = np.asarray(euclidean(a, b) if distance == "euclidean" else method.distance(a, b))
+    if D.shape != (len(a), len(b)):
+        raise DataError(
+            f"method {method.name!r}: distance returned shape {D.shape}, "
+            f"expected ({len(a)}, {len(b)})"
+        )
+    return D
+
+
+def describe_pair(method: Method, queries: Any, database: Any, memo: DatabaseMemo | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """(query descriptors, database descriptors, seconds spent describing, frames described).
+    `memo`: database descriptors described before in this process (`describe_database`)."""
+    progress.expect(len(queries) + len(database))
+    d_db, s_db = describe_database(method, database, memo)
+    d_q, s_q = describe(method, queries)
+    return d_q, d_db, s_db + s_q, len(d_db) + len(d_q)
+
+
 def difference_matrix(method: Method, queries: Any, database: Any, distance: str = "method",
                       memo: DatabaseMemo | None = None) -> tuple[np.ndarray, float, int]:
     """Describe both sides and compare them (`distance`: "method" = `Method.distance`,
     "euclidean" = plain L2); returns (D, seconds spent describing, frames).
     `memo`: database descriptors described before in this process (`describe_database`)."""
-    progress.expect(len(queries) + len(database))
-    d_db, s_db = describe_database(method, database, memo)
-    d_q, s_q = describe(method, queries)
-    describe_s = s_db + s_q
-    n = len(d_db) + len(d_q)
-    D = np.asarray(euclidean(d_q, d_db) if distance == "euclidean" else method.distance(d_q, d_db))
-    if D.shape != (len(d_q), len(d_db)):
-        raise DataError(
-            f"method {method.name!r}: distance returned shape {D.shape}, "
-            f"expected ({len(d_q)}, {len(d_db)})"
-        )
-    return D, describe_s, n
+    d_q, d_db, describe_s, n = describe_pair(method, queries, database, memo)
+    return compare(method, d_q, d_db, distance), describe_s, n
+
+
+def choose_window(method: Method, database_descriptors: np.ndarray,
+                  distance: str = "method") -> WindowChoice:
+    """The ``dip`` rule's enhancement window for this database (`safl_bench.matching.window`):
+    the self-difference of `DIP_ROWS` database frames to all of them, by the cell's distance.
+    The cells that share a database (the seeds and conditions of a paper-protocol sequence get
+    the very descriptor array from `describe_database`'s memo) share its choice: it is kept
+    while that array lives, so the rule is measured once per database and method."""
+    key = (id(method), id(database_descriptors), distance)
+    held = _WINDOWS.get(key)
+    if held is not None and held[0]() is database_descriptors and held[1]() is method:
+        return held[2]
+    at = sample_rows(len(database_descriptors))
+    rows = compare(method, database_descriptors[at], database_descriptors, distance)
+    choice = dip_window(rows, at)
+    if len(_WINDOWS) >= _MEMO_LIMIT:
+        _WINDOWS.pop(next(iter(_WINDOWS)))
+    _WINDOWS[key] = (weakref.ref(database_descriptors), weakref.ref(method), choice)
+    return choice
+
+
+#: `choose_window`'s choices: (method, descriptors, distance) ids -> (the descriptors, the
+#: method, the choice), checked by identity before reuse.
+_WINDOWS: dict[tuple[int, int, str], tuple[weakref.ref[Any], weakref.ref[Any], WindowChoice]] = {}
 
 
 def evaluate_method(
@@ -187,13 +229,20 @@ def evaluate_method(
     if is_retrieval(method):
         return evaluate_retrieval(method, queries, database, truth, config=cfg, revisit=revisit,
                                   context=context)
-    D, describe_s, n = difference_matrix(method, queries, database, cfg.distance, memo)
+    d_q, d_db, describe_s, n = describe_pair(method, queries, database, memo)
+    D = compare(method, d_q, d_db, cfg.distance)
     limit = truth.db_limit() if revisit else None
     matches: dict[str, MatchResult] = {}
     seconds: dict[str, float] = {}
+    window: WindowChoice | None = None
     for mode in MODES:
         t0 = time.perf_counter()
-        matches[mode] = match(D, cfg.matcher(mode), db_limit=limit)
+        matcher = cfg.matcher(mode)
+        if matcher.needs_window:  # part of the sequence matcher's time
+            window = choose_window(method, d_db, cfg.distance)
+        matches[mode] = match(D, matcher, db_limit=limit,
+                              enhance_window=window.window if matcher.needs_window and window
+                              else None)
         seconds[mode] = time.perf_counter() - t0
     scored = scored_queries(len(D), cfg.trim_queries, context)
     part = subset_truth(truth, scored, slice(None)) if scored != slice(0, len(D)) else truth
@@ -204,7 +253,8 @@ def evaluate_method(
                                       ranks if mode == "single_frame" else None)
                  for mode in MODES}
     metrics = {mode: evaluate_outcomes(per_query[mode], recall_at=RECALL_AT) for mode in MODES}
-    return Evaluation(matches, per_query, metrics, describe_s, n, seconds["sequence"])
+    return Evaluation(matches, per_query, metrics, describe_s, n, seconds["sequence"],
+                      window=window)
 
 
 def evaluate_retrieval(

@@ -16,7 +16,13 @@ are the paper's; `safl_bench.matching.presets` names whole sets of these setting
 
    with ``W(j) = [j - R//2, j + R//2]`` clipped to the database ("centred", as OpenSeqSLAM, whose
    paper [8] the authors cite for this step) or ``[j - R, j]`` ("causal", option),
-   ``R = enhance_window`` (0 disables). A window of one frame (causal, j = 0) or a window with (numerically) zero spread, i.e. variance
+   ``R = enhance_window`` (0 disables). ``enhance_rule="dip"`` takes R from the data instead:
+   from the width of the dip in the DATABASE's own self-difference, measured per cell with the
+   cell's distance, no ground truth and no score involved (`safl_bench.matching.window`, whose
+   docstring argues the rule and its constants); ``match`` is then given that R
+   (``enhance_window=`` argument) and ``enhance_window`` must be 0. The ``paper`` preset uses
+   the rule; ``paper-r10`` keeps OpenSeqSLAM's fixed 10 frames, which on these tasks (every 4th
+   frame, 60-80 m views) lie inside the true match's own dip. A window of one frame (causal, j = 0) or a window with (numerically) zero spread, i.e. variance
    <= 1e-12 x the variance of the whole row, gives ``Dhat = 0``. Then, as in OpenSeqSLAM, the
    whole enhanced matrix is shifted so that its minimum is 0 (``shift=True``, default: this
    does not change any match and makes S >= 0, which the ratio score needs). ``shift=False``
@@ -107,6 +113,16 @@ from safl_bench.matching.confidence import confidence_from_score
 
 ScoreKind = Literal["min", "ratio", "inverse"]
 SCORES = ("min", "ratio", "inverse")
+#: How the contrast-enhancement window is set: ``enhance_window`` itself, or from the
+#: database's self-difference (`safl_bench.matching.window`).
+ENHANCE_RULES = ("fixed", "dip")
+#: What a record made before a setting existed holds for it, where that differs from the
+#: dataclass default: records made before ``enhance_rule`` used the fixed window, and their
+#: preset name is the one they name (``paper`` then is ``paper-r10`` now: `settings.RENAMED_PRESETS`).
+_BEFORE: dict[str, Any] = {"enhance_rule": "fixed"}
+#: The preset a record made before ``enhance_rule`` names as ``paper`` (or, before the presets,
+#: names none of): the fixed 10-frame window, called ``paper-r10`` since ``paper`` took the rule.
+OLD_PAPER = "paper-r10"
 _DTYPES = {"float32": np.float32, "float64": np.float64}
 
 
@@ -126,6 +142,7 @@ class MatcherConfig:
     v_inclusive: bool = True
     enhance_window: int = 10
     enhance_mode: Literal["centred", "causal"] = "centred"
+    enhance_rule: Literal["fixed", "dip"] = "fixed"
     trajectory: Literal["causal", "centred"] = "causal"
     edge_queries: Literal["shorten", "skip"] = "shorten"
     out_of_range: Literal["exclude", "clip"] = "exclude"
@@ -135,7 +152,7 @@ class MatcherConfig:
     shift: bool = True
     offset_rounding: Literal["half_up", "floor_start"] = "half_up"
     capped_match: int | None = None
-    preset: str = "paper"
+    preset: str = "paper-r10"
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> None:
@@ -157,6 +174,15 @@ class MatcherConfig:
             bad(f"v_max ({self.v_max}) must be >= v_min ({self.v_min})")
         if self.enhance_window < 0 or (self.enhance_window == 1 and self.enhance_mode == "centred"):
             bad(f"enhance_window must be 0 (off) or >= 2, got {self.enhance_window}")
+        if self.enhance_rule not in ENHANCE_RULES:
+            bad(f"enhance_rule must be one of {', '.join(map(repr, ENHANCE_RULES))}, "
+                f"got {self.enhance_rule!r}")
+        if self.enhance_rule == "dip" and self.enhance_window != 0:
+            bad(f"enhance_rule='dip' chooses the window from the database, so enhance_window "
+                f"must be 0, got {self.enhance_window} (enhance_rule=fixed keeps a fixed window)")
+        if self.enhance_rule == "dip" and self.enhance_mode != "centred":
+            bad("enhance_rule='dip' measures a window centred on the frame; "
+                f"enhance_mode must be 'centred', got {self.enhance_mode!r}")
         if self.enhance_mode not in ("centred", "causal"):
             bad(f"enhance_mode must be 'centred' or 'causal', got {self.enhance_mode!r}")
         if self.trajectory not in ("causal", "centred"):
@@ -225,7 +251,15 @@ class MatcherConfig:
         unknown = sorted(set(data) - valid)
         if unknown:
             raise ConfigError(f"matcher settings: unknown setting(s) {unknown}; valid: {sorted(valid)}")
-        return cls(**data)
+        # settings older than a field: its value then, where the dataclass default has moved
+        if "enhance_rule" not in data and data.get("preset", "paper") == "paper":
+            data = {**data, "preset": OLD_PAPER}
+        return cls(**{**_BEFORE, **data})
+
+    @property
+    def needs_window(self) -> bool:
+        """Whether `match` must be given the enhancement window (``enhance_rule="dip"``)."""
+        return self.enhance_rule == "dip"
 
 
 @dataclass
@@ -240,6 +274,8 @@ class MatchResult:
     complete: np.ndarray  # (Nq,) bool, n_terms == ds + 1
     config: MatcherConfig
     S: np.ndarray | None = field(default=None, repr=False)  # (Nq, Ndb) S(T, j), +inf = none
+    #: the contrast-enhancement window used (`window_of`: the config's, or the dip rule's)
+    enhance_window: int | None = None
 
     @property
     def confidence(self) -> np.ndarray:
@@ -454,12 +490,35 @@ def enhance(D: np.ndarray, window: int = 10, mode: str = "centred", *, dtype: st
     return out
 
 
-def _enhanced(arr: np.ndarray, cfg: MatcherConfig, given: Any) -> tuple[np.ndarray, float]:
+def window_of(cfg: MatcherConfig, enhance_window: int | None = None) -> int:
+    """The contrast-enhancement window `cfg` uses: ``enhance_window`` for the fixed rule, the
+    one given (chosen from the database, `safl_bench.matching.window.dip_window`) for the
+    ``dip`` rule, which needs it (ConfigError without). A window given to a fixed rule that
+    differs from its own is a ConfigError too: the record would not say what ran."""
+    if cfg.enhance_rule == "dip":
+        if enhance_window is None:
+            raise ConfigError("matcher config: enhance_rule='dip' takes its window from the "
+                              "database (safl_bench.matching.window.dip_window); pass it as "
+                              "enhance_window=")
+        if not isinstance(enhance_window, int | np.integer) or isinstance(enhance_window, bool) \
+                or enhance_window < 2:
+            raise ConfigError(f"the dip rule's enhancement window must be an integer >= 2, "
+                              f"got {enhance_window!r}")
+        return int(enhance_window)
+    if enhance_window is not None and enhance_window != cfg.enhance_window:
+        raise ConfigError(f"enhance_window={enhance_window} given for a fixed window of "
+                          f"{cfg.enhance_window} (enhance_rule='fixed'): set it in the config")
+    return cfg.enhance_window
+
+
+def _enhanced(arr: np.ndarray, cfg: MatcherConfig, given: Any,
+              window: int) -> tuple[np.ndarray, float]:
     """(the contrast-enhanced matrix, the shift that makes its minimum 0, or 0.0 without it).
-    `arr` is `given` converted; a converted copy is enhanced in place, `given` never is."""
-    if cfg.enhance_window > 0:
-        before, after = ((cfg.enhance_window // 2, cfg.enhance_window // 2)
-                         if cfg.enhance_mode == "centred" else (cfg.enhance_window, 0))
+    `arr` is `given` converted; a converted copy is enhanced in place, `given` never is.
+    `window`: `window_of(cfg, ...)`."""
+    if window > 0:
+        before, after = ((window // 2, window // 2)
+                         if cfg.enhance_mode == "centred" else (window, 0))
         dh = arr if arr is not given else np.empty_like(arr)
         _enhance_kernel(arr, dh, before, after)  # row-wise, safe in place
     else:
@@ -467,13 +526,15 @@ def _enhanced(arr: np.ndarray, cfg: MatcherConfig, given: Any) -> tuple[np.ndarr
     return dh, (float(dh.min()) if cfg.shift else 0.0)
 
 
-def enhanced_matrix(D: np.ndarray, config: MatcherConfig | None = None) -> np.ndarray:
+def enhanced_matrix(D: np.ndarray, config: MatcherConfig | None = None, *,
+                    enhance_window: int | None = None) -> np.ndarray:
     """The matrix the sequence search reads for `config` (module doc, 1): D contrast-enhanced
     (Eq. 5) and, with ``shift``, moved so that its minimum is 0; a new (Nq, Ndb) array in the
-    config's dtype. `MatchResult.best_s` is the mean of this matrix over the best trajectory."""
+    config's dtype. `MatchResult.best_s` is the mean of this matrix over the best trajectory.
+    `enhance_window`: the window of the ``dip`` rule (`window_of`)."""
     cfg = config or MatcherConfig()
     arr = _as_difference(D, _DTYPES[cfg.dtype])
-    dh, shift = _enhanced(arr, cfg, D)
+    dh, shift = _enhanced(arr, cfg, D, window_of(cfg, enhance_window))
     if isinstance(D, np.ndarray) and np.may_share_memory(dh, D):
         dh = dh.copy()  # never the caller's array
     if shift:
@@ -487,9 +548,13 @@ def match(
     *,
     db_limit: np.ndarray | None = None,
     keep_S: bool = False,
+    enhance_window: int | None = None,
 ) -> MatchResult:
-    """Run the matcher described by `config` on the difference matrix D (Nq, Ndb)."""
+    """Run the matcher described by `config` on the difference matrix D (Nq, Ndb).
+    `enhance_window`: the window the ``dip`` rule chose for this database (`window_of`;
+    `MatchResult.enhance_window` is the one used)."""
     cfg = config or MatcherConfig()
+    window = window_of(cfg, enhance_window)
     ft = _DTYPES[cfg.dtype]
     arr = _as_difference(D, ft)
     nq, ndb = arr.shape
@@ -504,7 +569,7 @@ def match(
             raise DataError(f"db_limit values must lie in [0, {ndb}]")
         limit = limit.astype(np.int64)
 
-    dh, shift = _enhanced(arr, cfg, D)
+    dh, shift = _enhanced(arr, cfg, D, window)
 
     offs = cfg.offsets()
     u_lo, _ = cfg.u_range()
@@ -538,7 +603,7 @@ def match(
         S = S_out
     return MatchResult(
         index=index, score=score, best_s=best_s, velocity=velocity, n_terms=n_terms,
-        complete=n_terms == cfg.ds + 1, config=cfg, S=S)
+        complete=n_terms == cfg.ds + 1, config=cfg, S=S, enhance_window=window)
 
 
 def _inverse_score(best_s: np.ndarray, n_terms: np.ndarray,

@@ -7,8 +7,16 @@ name into every record) and the evaluation-level settings. Every record holds al
 settings; `label` names them for tables ("paper", "authors+enhance_window=0").
 
 ``paper`` - the paper as printed: Table I (d_s = 10; V from 0.8 to 1.1 by 0.1) and Eq. 5-7
-(`safl_bench.matching.matcher`, whose docstring says how each gap is filled: the contrast-enhancement
-window of 10 frames, centred, is OpenSeqSLAM's, since the paper gives none). These are the
+(`safl_bench.matching.matcher`, whose docstring says how each gap is filled), with Eq. 5's
+window, which the paper does not give, chosen per cell by the ``dip`` rule: from the width of
+the dip in the database's own self-difference, no ground truth and no score involved
+(`safl_bench.matching.window` argues the rule and its constants). The default.
+
+``paper-r10`` - what ``paper`` was before the rule (records made as ``paper`` until then are read
+as this one: `MatcherConfig.from_dict`): the same, with OpenSeqSLAM's fixed window of 10
+frames, centred. On these tasks (every 4th frame, 3.5 m apart; top views 60-80 m wide) those
++-5 frames lie inside the true match's own dip, and the enhancement ranks the true frame below
+its neighbours (the matching.window docstring gives the numbers). These are the
 `MatcherConfig` defaults, unchanged since before the presets.
 
 ``authors`` - the paper-era evaluation of the LEARNED features in the authors' public code,
@@ -154,8 +162,8 @@ _TRUTH_AT = ("paper §IV and the authors' code leave it open: their score reads 
 _TM = "CNN-GAN/Top-Mapping "
 _MATCHING = "safl_bench/matching.py docstring (a gap the paper leaves, filled there)"
 
-#: Where the ``paper`` preset's values come from (the paper: /work/shared/paper, Table I, Eq. 4-7).
-_PAPER = {
+#: Where the ``paper-r10`` preset's values come from (the paper, Table I, Eq. 4-7).
+_PAPER_R10 = {
     "ds": "paper Table I (d_s = 10)", "v_min": "paper Table I (V_min = 0.8)",
     "v_max": "paper Table I (V_max = 1.1)", "v_step": "paper Table I (V_step = 0.1)",
     "v_inclusive": "paper Table I (0.8 to 1.1)", "enhance_window": _MATCHING + ": OpenSeqSLAM's R = 10",
@@ -165,6 +173,14 @@ _PAPER = {
     "shift": _MATCHING, "offset_rounding": _MATCHING, "capped_match": "unused by min",
     "max_frames": "paper §IV (the whole test sequence)", "trim_queries": "paper (none)",
     "distance": "paper Eq. 4 (the method's difference: squared L2 for latent codes)",
+    "enhance_rule": "this project (a fixed window)",
+}
+#: ``paper``: as ``paper-r10``, with the window from the data (`safl_bench.matching.window`).
+_PAPER = {
+    **_PAPER_R10,
+    "enhance_window": "unused: the dip rule chooses it per cell",
+    "enhance_rule": "safl_bench/matching/window.py docstring (the paper gives no window: from "
+                    "the width of the database's self-difference dip)",
 }
 
 _U, _P, _S, _Q = ("src/util/utils.py:", "parameters.py:", "src/plot/SLFL/plotDraw_slfl.py:",
@@ -188,6 +204,7 @@ _AUTHORS = {
     "max_frames": _P + "66@25be0fd (test_len = 300; frame_skip = 1 at :64), " + _S + "51, 60",
     "trim_queries": _S + "111@25be0fd (match[v_ds/2 : n - v_ds/2])",
     "distance": _U + "76@25be0fd (np.linalg.norm), called at " + _S + "62",
+    "enhance_rule": "a fixed window: " + _S + "63@25be0fd (enhanceContrast(D, 30))",
 }
 
 #: The authors' SAD path (``authors-sad``), where it differs from ``authors``, at 25be0fd.
@@ -210,12 +227,14 @@ _AUTHORS_SAD = {
     "max_frames": _Q + "src/seqslam.py:73@25be0fd with " + _P + "66 (test_len = 300)",
     "trim_queries": _Q + "seq_lidar.py:116@25be0fd (v_ds + 10 = 20 at each end)",
     "distance": _Q + "src/seqslam.py:152-153@25be0fd (sum |d| / n: SAD, the method's own)",
+    "enhance_rule": "a fixed window: " + _Q + "src/parameters.py:44@25be0fd (R = 10)",
 }
 
 #: ``authors-2018``: the settings "authors" held before the rename (the later code, 9782be3).
 _AUTHORS_2018 = {
     **{k: v.replace("@25be0fd", "@25be0fd (unchanged at 9782be3)") for k, v in _AUTHORS.items()},
     "enhance_window": _P + "13@9782be3 (enhance = 20), passed to " + _U + "215@9782be3",
+    "enhance_rule": "a fixed window: " + _P + "13@9782be3 (enhance = 20)",
     "max_frames": _P + "92@9782be3 (test_len = 200; frame_skip = 4 at :90)",
     "trim_queries": _Q + "seq_lidar.py:116@9782be3 (v_ds + 10: the SAD script's trim)",
     "distance": "this project's Eq. 4 square (the code's Euclidean, " + _U + "76@9782be3, is L2)",
@@ -224,7 +243,7 @@ _AUTHORS_2018 = {
 _SQ = _Q + "src/"
 #: ``openseqslam``: OpenSeqSLAM's defaults as the authors' Python port ships them (25be0fd).
 _OPENSEQSLAM = {
-    **_PAPER,
+    **_PAPER_R10,
     "ds": _SQ + "parameters.py:33@25be0fd (matching.ds = 10)",
     "v_max": _SQ + "parameters.py:37@25be0fd (vmax = 1.2)",
     "v_min": _SQ + "parameters.py:35@25be0fd (vmin = 0.8)",
@@ -237,12 +256,16 @@ _OPENSEQSLAM = {
              "port's commented line " + _SQ + "seqslam.py:259@25be0fd",
     "ratio_window": _SQ + "parameters.py:38@25be0fd (Rwindow = 10)",
     "shift": _SQ + "seqslam.py:180@25be0fd",
+    "enhance_rule": "a fixed window: " + _SQ + "parameters.py:44@25be0fd (R = 10)",
 }
 
 
 PRESETS: dict[str, Preset] = {p.name: p for p in (
-    _preset("paper", "the paper: Table I and Eq. 5-7 as printed (OpenSeqSLAM's 10-frame "
-                     "enhancement window, where the paper gives none); the default", _PAPER),
+    _preset("paper", "the paper: Table I and Eq. 5-7 as printed, Eq. 5's window (which the "
+                     "paper does not give) from the database's self-difference dip; the default",
+            _PAPER, enhance_rule="dip", enhance_window=0),
+    _preset("paper-r10", "'paper' before the window rule: OpenSeqSLAM's fixed 10-frame "
+                         "enhancement window (records made as 'paper' until then)", _PAPER_R10),
     _preset("authors", "the paper-era evaluation of learned features in the authors' code "
                        "(CNN-GAN/Top-Mapping@25be0fd plotDraw_slfl.py, utils.py, parameters.py): "
                        "plain L2, 30-frame unshifted z-scores, 1/S capped at 1, 300 frames",
@@ -266,6 +289,11 @@ PRESETS: dict[str, Preset] = {p.name: p for p in (
             _OPENSEQSLAM, v_max=1.2, trajectory="centred", offset_rounding="floor_start",
             edge_queries="skip", score="ratio"),
 )}
+
+
+def default_config() -> EvaluationConfig:
+    """The settings of the default preset (`DEFAULT`), what a run without a preset uses."""
+    return PRESETS[DEFAULT].config
 
 
 def names() -> list[str]:
@@ -304,6 +332,7 @@ SETTING_HELP: dict[str, str] = {
     "v_inclusive": "whether v_max itself is one of the velocities",
     "enhance_window": "contrast-enhancement window in database frames (Eq. 5; 0: off)",
     "enhance_mode": "that window centred on the frame, or ending at it (causal)",
+    "enhance_rule": "the window as given (fixed), or from the database's self-difference dip (dip)",
     "trajectory": "trajectory ending at the query (causal, Eq. 6) or centred on it",
     "edge_queries": "queries without a full trajectory: a shorter one, or no match (skip)",
     "out_of_range": "trajectory points past the database: drop the candidate, or clip",

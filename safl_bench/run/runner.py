@@ -49,7 +49,9 @@ from safl_bench.common.parallel import JobResult, Parallel, run_jobs
 from safl_bench.errors import ConfigError, SaflError
 from safl_bench.evaluation.cell import DatabaseMemo, evaluate_method
 from safl_bench.evaluation.metrics import METRICS_VERSION, NoPositivesError
+from safl_bench.matching.presets import default_config
 from safl_bench.matching.settings import MODES, EvaluationConfig, same_settings
+from safl_bench.matching.window import RECORD_KEY, WindowChoice
 from safl_bench.methods.method import Method, input_note, method_input, method_selector
 from safl_bench.methods.retrieval import NO_SEQUENCE, NO_SEQUENCE_WHY, is_retrieval
 from safl_bench.results.records import (
@@ -91,7 +93,7 @@ class RunOptions:
     bev_root: str | None = None
     bev_resolution_m: float | None = None  # None: the source's default (0.4 m per pixel)
     bev_rot_root: str | None = None  # the rotated top views (TaskSpec.rotated); None: $SAFL_BEV_ROT_ROOT
-    evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+    evaluation: EvaluationConfig = field(default_factory=default_config)
     timing_frames: int = 20
     timing_repeats: int = 5
     progress: bool = True  # bars on a terminal, else a line per finished cell (module docstring)
@@ -145,6 +147,15 @@ def view_kind(method: Method, task: Task) -> str:
             and getattr(method, "reads_topview", False)):
         return "topview"
     return method.input_kind
+
+
+def recorded_settings(evaluation: EvaluationConfig, window: WindowChoice | None) -> dict[str, Any]:
+    """A record's ``matcher`` field: the settings, and what the ``dip`` rule chose for the cell's
+    database (`WindowChoice.to_dict`, under `window.RECORD_KEY`) when the preset uses it."""
+    out = evaluation.to_dict()
+    if window is not None:
+        out[RECORD_KEY] = window.to_dict()
+    return out
 
 
 def _same_run(method: MethodInfo, task: TaskInfo, matcher: dict[str, Any], want_method: MethodInfo,
@@ -301,7 +312,7 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
             n_queries=data["n_queries"], n_database=data["n_database"], **extra,
         ),
         seed=task.spec.seed,
-        matcher=options.evaluation.to_dict(),
+        matcher=recorded_settings(options.evaluation, evaluation.window),
         results={m: mode_result_from_evaluation(evaluation.metrics[m], evaluation.outcomes[m])
                  for m in MODES if m in evaluation.metrics},
         describe_frames_per_s=evaluation.n_described / max(evaluation.describe_s, 1e-12),
