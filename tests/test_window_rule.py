@@ -97,3 +97,14 @@ def test_the_paper_preset_chooses_and_records_the_window_per_cell() -> None:
     assert ev.matches["single_frame"].enhance_window == 0
     fixed = evaluate_method(method, np.arange(n), np.arange(n), truth)
     assert fixed.window is None and fixed.matches["sequence"].enhance_window == 10
+
+
+def test_a_window_given_on_the_command_line_is_a_fixed_window() -> None:
+    off = matcher_presets.configure("paper", {"enhance_window": 0}).sequence
+    assert off.enhance_rule == "fixed" and off.enhance_window == 0 and not off.needs_window
+    assert matcher_presets.label(matcher_presets.configure("paper", {"enhance_window": 30})) \
+        == "paper+enhance_window=30,enhance_rule=fixed"
+    assert matcher_presets.label(matcher_presets.configure("paper", {"enhance_window": 0})) \
+        == "paper+enhance_rule=fixed,enhance_window=0"
+    assert matcher_presets.configure("paper-r10", {"enhance_rule": "dip",
+                                                   "enhance_window": 0}).sequence.needs_window

@@ -352,13 +352,17 @@ SETTING_HELP: dict[str, str] = {
 def configure(name: str = DEFAULT, changes: dict[str, Any] | None = None,
               *, flag: str = "--matcher") -> EvaluationConfig:
     """Preset `name` with `changes` (setting -> value) on top; the name stays recorded as the
-    ``preset`` setting, the changed values beside it. An unknown setting is a ConfigError that
+    ``preset`` setting, the changed values beside it. Giving ``enhance_window`` without
+    ``enhance_rule`` means that fixed window (so ``enhance_window=0`` turns enhancement off on
+    the ``paper`` preset too, whose rule would otherwise choose one). An unknown setting is a ConfigError that
     names the valid ones (`flag` names the option in the message)."""
     base = get(name).config
     changes = dict(changes or {})
     unknown = sorted(set(changes) - set(SETTINGS))
     if unknown:
         raise ConfigError(f"{flag}: unknown setting(s) {unknown}; valid: {sorted(SETTINGS)}")
+    if "enhance_window" in changes and "enhance_rule" not in changes:
+        changes["enhance_rule"] = "fixed"  # a window given is a fixed window (0: off)
     matcher = {k: v for k, v in changes.items() if k not in EVALUATION_SETTINGS}
     evaluation = {k: v for k, v in changes.items() if k in EVALUATION_SETTINGS}
     try:
@@ -389,7 +393,10 @@ def changes(config: EvaluationConfig) -> dict[str, Any]:
     if preset is None:
         return {}
     mine, base = settings(config), settings(preset.config)
-    return {k: v for k, v in mine.items() if k != "preset" and v != base[k]}
+    diff = {k: v for k, v in mine.items() if k != "preset" and v != base[k]}
+    if "enhance_rule" in diff and mine["enhance_rule"] == "fixed":
+        diff["enhance_window"] = mine["enhance_window"]  # a fixed window: name it, 0 included
+    return diff
 
 
 def label(config: EvaluationConfig | dict[str, Any]) -> str:
