@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from safl_bench import metrics
+from safl_bench.matching.presets import default_config
 from safl_bench.provenance import Environment
 from safl_bench.records import (
     MethodInfo,
@@ -86,7 +87,7 @@ def make_record(
             spec_fingerprint=spec_fingerprint,
         ),
         seed=seed,
-        matcher={"ds": 10, "v_min": 0.8, "v_max": 1.1, "v_step": 0.1},
+        matcher=default_config().to_dict(),  # what a run under the default preset records
         results=results,
         timings=Timings(
             describe_ms_per_frame=ms,

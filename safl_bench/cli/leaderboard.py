@@ -64,6 +64,31 @@ def load_preset_records(out: Path) -> tuple[list[ResultRecord], list[Problem]]:
     return records, problems
 
 
+def default_preset_only(records: list[ResultRecord], folder: Path
+                        ) -> tuple[list[ResultRecord], list[Problem]]:
+    """(the records of the default matcher preset, one Problem per other record): the records
+    folder holds the default preset's runs, so that no table mixes two presets; a record made
+    under another (e.g. ``paper-r10``, the default before the window rule) is refused with the
+    command that recomputes it under the default, or the folder it belongs in."""
+    from safl_bench.matching.presets import DEFAULT
+    from safl_bench.results.records import record_path, rerun_command
+
+    kept: list[ResultRecord] = []
+    refused: list[Problem] = []
+    for record in records:
+        name = label(record.matcher)
+        if name == DEFAULT:
+            kept.append(record)
+            continue
+        path = record_path(folder, record.method.name, record.method.version, record.task.id,
+                           record.seed)
+        refused.append(Problem(path, f"made under matcher preset {name!r}, not the default "
+                               f"{DEFAULT!r} this folder holds; recompute it with: "
+                               f"{rerun_command(record)} --results {folder}, or move it to "
+                               f"preset-records/{name}/"))
+    return kept, refused
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """--results, --out, --training-logs, --no-figures."""
     parser.add_argument(
@@ -96,6 +121,8 @@ def main(args: argparse.Namespace) -> int:
     results = Path(args.results) if args.results else out / "records"
     logs = Path(args.training_logs) if args.training_logs else out / "training-logs"
     records, problems = load_records(results)
+    records, other_preset = default_preset_only(records, results)
+    problems += other_preset
     preset_records, bad = load_preset_records(out)
     shown = {id(r): _shown(out / "preset-records" / label(r.matcher)) for r in preset_records}
     # checkpoints selected on the test set: only Table II shows them, in rows of their own
