@@ -108,3 +108,26 @@ def test_a_window_given_on_the_command_line_is_a_fixed_window() -> None:
         == "paper+enhance_rule=fixed,enhance_window=0"
     assert matcher_presets.configure("paper-r10", {"enhance_rule": "dip",
                                                    "enhance_window": 0}).sequence.needs_window
+
+
+def test_a_retrieval_record_follows_a_change_of_the_sequence_matcher_without_a_recompute() -> None:
+    import dataclasses
+
+    from record_factory import make_record
+
+    from safl_bench.evaluation import EvaluationConfig
+    from safl_bench.records import MethodInfo
+    from safl_bench.results.derive import NotDerivableError, relabel_retrieval
+
+    old = make_record("map_closures")
+    old = dataclasses.replace(old, matcher=EvaluationConfig().to_dict(),
+                              method=MethodInfo(name="map_closures", version="1", kind="retrieval"))
+    paper = matcher_presets.get("paper").config.to_dict()
+    new = relabel_retrieval(old, paper)
+    assert matcher_presets.label(new.matcher) == "paper" and new.results == old.results
+    assert new.derived_from is not None and "relabelled paper-r10 -> paper" in new.derived_from.note
+    trimmed = matcher_presets.configure("paper", {"trim_queries": 3}).to_dict()
+    with pytest.raises(NotDerivableError, match="differ beyond the sequence matcher"):
+        relabel_retrieval(old, trimmed)
+    with pytest.raises(NotDerivableError, match="not a retrieval method"):
+        relabel_retrieval(make_record("sad"), paper)

@@ -192,3 +192,47 @@ def superseded_note(records: list[ResultRecord], folder: str | Path) -> str | No
     return (f"{n} records in {folder} are of task versions a newer one replaced ({shown}): they are "
             f"tabled under their own version, never beside the current one; `safl-bench records "
             f"migrate {folder}` derives the current versions' records from them")
+
+
+def retrieval_settings(matcher: Any) -> dict[str, Any] | None:
+    """The settings a retrieval method's answers depend on, from a record's ``matcher`` field:
+    the evaluation-level ones and the single-frame matcher's (its score rule, dtype), without
+    the preset's name. The sequence matcher does not apply to a retrieval method
+    (`safl_bench.methods.retrieval`), so records whose settings differ only there hold the same
+    answers. None when the field cannot be read."""
+    from safl_bench.errors import ConfigError
+    from safl_bench.matching.settings import EvaluationConfig
+
+    try:
+        config = EvaluationConfig.from_dict(matcher)
+    except (ConfigError, TypeError):
+        return None
+    single = config.single_frame.to_dict()
+    single.pop("preset")
+    return {"single_frame": single,
+            "evaluation": config.to_dict()["evaluation"]}
+
+
+def relabel_retrieval(record: ResultRecord, matcher: dict[str, Any]) -> ResultRecord:
+    """`record` of a retrieval method under the matcher settings `matcher` (another preset's),
+    without recomputing it: its answers depend only on `retrieval_settings`, which must be the
+    same in both (else NotDerivableError). Everything else is kept; `created` is now and
+    `derived_from` says what was relabelled. This is how a retrieval method's records follow a
+    change of the default preset that touches only the sequence matcher (``paper-r10`` ->
+    ``paper``: the enhancement window), instead of being run again."""
+    from safl_bench.matching.presets import label
+
+    if record.method.kind != "retrieval":
+        raise NotDerivableError(f"{record.method.name}@{record.method.version} is not a "
+                                "retrieval method: its sequence matches depend on the settings")
+    old, new = retrieval_settings(record.matcher), retrieval_settings(matcher)
+    if old is None or old != new:
+        raise NotDerivableError(f"{record.task.id} seed {record.seed}: the settings differ "
+                                "beyond the sequence matcher, which a retrieval method does "
+                                "not use; recompute it")
+    note = (f"matcher settings relabelled {label(record.matcher)} -> {label(matcher)} without "
+            "recomputing: the sequence matcher does not apply to a retrieval method, and the "
+            "single-frame and evaluation settings are the same")
+    return dataclasses.replace(
+        record, matcher=dict(matcher), created=utc_now(),
+        derived_from=Derivation(task=record.task.id, created=record.created, note=note))

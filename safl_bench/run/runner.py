@@ -106,7 +106,10 @@ class CellOutcome:
 
     task_id: str
     seed: int
-    status: str  # "computed", "reused", "rescored", "derived" (`_derived`) or "failed"
+    #: "computed", "reused", "rescored", "derived" (`_derived`), "relabelled" (a retrieval
+    #: method's record under other sequence-matcher settings: `derive.relabel_retrieval`) or
+    #: "failed"
+    status: str
     path: Path
     record: ResultRecord | None = None
     message: str = ""
@@ -209,6 +212,17 @@ def _existing(
                 log(f"note: {path} was scored with metrics version {old.metrics_version} "
                     f"(this code: {METRICS_VERSION}) and holds no per-query outcomes; "
                     "recomputing it (its timings are kept)")
+            elif why == "matcher settings differ" and old.method.kind == "retrieval":
+                from safl_bench.results.derive import NotDerivableError, relabel_retrieval
+
+                try:
+                    moved = relabel_retrieval(old, matcher)
+                except NotDerivableError:
+                    log(f"note: {path} was made with other settings ({why}); recomputing it")
+                else:
+                    written = write_record(options.results_dir, moved)
+                    return seed, CellOutcome(registered.id, seed, "relabelled", written, moved,
+                                             method=info.name, version=info.version)
             else:
                 log(f"note: {path} was made with other settings ({why}); recomputing it")
     else:
