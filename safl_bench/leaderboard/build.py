@@ -22,6 +22,7 @@ field reports today, on the data it reports it on.
 
 from __future__ import annotations
 
+import json
 import os
 from collections import defaultdict
 from collections.abc import Callable, Sequence
@@ -56,7 +57,11 @@ from safl_bench.leaderboard.training_logs import TrainingLog, load_training_logs
 from safl_bench.results.records import Problem, ResultRecord
 
 GENERATED_DIRS = ("tables", "figures", "site")
-GENERATED_SUFFIXES = (".md", ".csv", ".png", ".html")
+#: The synthetic-against-real ranking comparison (`safl_bench.leaderboard.ranking`).
+RANKING_MD = "tables/ranking-synthetic-vs-real.md"
+RANKING_JSON = "tables/ranking-synthetic-vs-real.json"
+RANKING_PNG = "figures/ranking-synthetic-vs-real.png"
+GENERATED_SUFFIXES = (".md", ".csv", ".png", ".html", ".json")
 UNKNOWN_SOURCE = "data source not recorded in the log"
 #: What every table showing a recall says about it (`safl_bench.evaluation.metrics` defines each measure;
 #: the text names it by its old path, which still imports, so the committed tables stay byte-identical).
@@ -251,6 +256,19 @@ def build_leaderboard(
 
     writer.text("tables/all-results.csv", frame_csv(all_results_frame(records)))
 
+    from safl_bench.leaderboard import ranking
+
+    comps = ranking.comparisons(records)
+    ranking_md = ""
+    if comps:
+        ranking_md = ranking.markdown(comps, level=2)
+        report.ranking = comps
+        report.ranking_md = writer.text(RANKING_MD, ranking.markdown(comps, level=1))
+        writer.text(RANKING_JSON, json.dumps([c.to_json() for c in comps], indent=1,
+                                             sort_keys=True) + "\n")
+        if figures:
+            report.ranking_figure = writer.figure(RANKING_PNG, partial(ranking.figure, comps))
+
     training: list[tuple[str, str, list[str]]] = []
     if training_logs is not None:
         logs, log_problems = load_training_logs(training_logs)
@@ -267,7 +285,8 @@ def build_leaderboard(
     report.training_figures = training
     report.problems.extend(skipped)
     index = _index(records, entries, report.headline, training, skipped, skipped_base, figures,
-                   report.headline_robust, report.headline_records)
+                   report.headline_robust, report.headline_records, ranking_md,
+                   report.ranking_figure)
     writer.text("index.md", index)
     if site:
         from safl_bench.leaderboard.site import default_records_folder, write_site
@@ -298,6 +317,8 @@ def _index(
     figures: bool,
     robust: Sequence[Table] = (),
     headline_records: Sequence[ResultRecord] = (),
+    ranking_md: str = "",
+    ranking_figure: str | None = None,
 ) -> str:
     lines = [
         "# safl-bench leaderboard",
@@ -348,6 +369,11 @@ def _index(
         else:
             lines.append("- No training logs were found.")
         lines.append("")
+    if ranking_md:
+        lines += [ranking_md.rstrip("\n"), ""]
+        if ranking_figure:
+            lines += [f"- Figure: [synthetic against real, Recall@1 per method]({ranking_figure}) "
+                      f"· [JSON]({RANKING_JSON})", ""]
     lines += [
         "## All results",
         "",

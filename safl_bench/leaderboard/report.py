@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from safl_bench.leaderboard.grouping import TableKey
+from safl_bench.leaderboard.ranking import Comparison
 from safl_bench.leaderboard.table2 import Row, Variant
 from safl_bench.leaderboard.tables import Table
 from safl_bench.results.records import Problem, ResultRecord
@@ -55,6 +56,11 @@ class BuildReport:
     table2_notes: dict[TableKey, tuple[list[str], list[str]]] = field(default_factory=dict)
     #: the Table II variants the build read (`table2.load_variants`): what each measured change gives
     table2_variants: list[Variant] = field(default_factory=list)
+    #: the synthetic-against-real ranking comparisons (`ranking.comparisons`), their Markdown
+    #: table and figure (relative to the leaderboard directory; None: not drawn)
+    ranking: list[Comparison] = field(default_factory=list)
+    ranking_md: str | None = None
+    ranking_figure: str | None = None
 
 
 def headline_rank(key: TableKey) -> tuple[object, ...]:

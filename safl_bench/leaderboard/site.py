@@ -46,6 +46,10 @@ from safl_bench.sources import root_options
 SITE_DIR = "site"
 INDEX = "index.html"
 ALL = "all.html"
+RANKING = "ranking.html"
+#: The image-fidelity figure `safl-bench data fidelity --out` writes beside the board (it needs
+#: real KITTI's images, so the build shows it when it is there and never draws it).
+FIDELITY_PNG = "fidelity/fidelity.png"
 #: What a figure needs when it is missing: the command that draws it.
 DRAW_FIGURES = "safl-bench leaderboard"
 
@@ -134,6 +138,8 @@ def write_site(
     order = sorted(groups, key=headline_rank)
     pages = [_Page(page_file(k), k.caption, k, groups[k]) for k in order]
     nav = [(INDEX, "Headline"), *((p.file, p.title) for p in pages), (ALL, "All tables")]
+    if report.ranking:
+        nav.insert(1, (RANKING, "Synthetic vs real KITTI"))
     skipped = [_problem_line(p, problem_base) for p in problems]
     written: list[Path] = []
 
@@ -159,6 +165,8 @@ def write_site(
                     out, page.key)
 
         emit(page.file, body, page.title, page.tables)
+    if report.ranking:
+        emit(RANKING, lambda reg: _ranking_body(report, out), "Synthetic vs real KITTI", [])
     every = [t for page in pages for t in page.tables]
     emit(ALL, lambda reg: "<h1>All tables</h1>" + "".join(_table_section(t, out, reg) for t in every),
          "All tables", every)
@@ -447,6 +455,27 @@ def _select(name: str, label: str, values: list[str]) -> str:
 
 def _attrs(attrs: dict[str, str]) -> str:
     return " ".join(f'{k}="{html.escape(v, quote=True)}"' for k, v in attrs.items())
+
+
+def _ranking_body(report: BuildReport, out: Path) -> str:
+    """The synthetic-against-real ranking page (`ranking`): the summary table, its notes, the
+    figure, and the image-fidelity figure when `data fidelity` wrote one beside the board."""
+    from safl_bench.leaderboard import ranking
+
+    rows = ranking.summary_rows(report.ranking)
+    head = "".join(f"<th>{_e(c)}</th>" for c in rows[0])
+    body = "".join("<tr>" + "".join(f"<td>{_e(c)}</td>" for c in r) + "</tr>" for r in rows[1:])
+    notes = "".join(f"<li>{_inline_code(n)}</li>" for n in ranking.notes(report.ranking))
+    figs = ""
+    if report.ranking_figure:
+        figs += _figure(out, report.ranking_figure, "Recall@1 per method, synthetic 00 against real 00")
+    if (out / FIDELITY_PNG).is_file():
+        figs += _figure(out, FIDELITY_PNG, "Image statistics and difficulty curves, synthetic 00 "
+                        "against real KITTI (`safl-bench data fidelity`)")
+    return (f"<h1>{_e(ranking.TITLE)}</h1><p>{_inline_code(ranking.INTRO)}</p>"
+            f'<section id="ranking"><div class="scroll"><table><thead><tr>{head}</tr></thead>'
+            f"<tbody>{body}</tbody></table></div><ul>{notes}</ul>"
+            f'<div class="figures">{figs}</div></section>')
 
 
 def _slam_section(out: Path, key: TableKey | None) -> str:
