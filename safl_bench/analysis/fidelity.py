@@ -58,6 +58,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from safl_bench.errors import DataError
+from safl_bench.leaderboard.ranking import weights_label
 
 SAD_CROP = 128
 DISTANCE_EDGES_M = tuple(float(v) for v in np.arange(0.0, 42.0, 2.0))
@@ -431,16 +432,6 @@ class MethodResult:
         return {"method": self.method, "task_id": self.task_id, "recall_at_1": self.recall_at_1,
                 "f1_max": self.f1_max, "status": self.status, "note": self.note,
                 "weights": self.weights}
-
-
-def weights_label(params: dict[str, Any]) -> str:
-    """'file sha256[:12]' of the weights in a record's method parameters ('' when none)."""
-    w = params.get("weights")
-    if not isinstance(w, dict):
-        return ""
-    if not w.get("sha256"):
-        return str(w.get("source", ""))  # "untrained"
-    return f"{Path(str(w.get('path', '?'))).name} {str(w['sha256'])[:12]}"
 
 
 def result_of(record: Any, status: str = "record") -> MethodResult:

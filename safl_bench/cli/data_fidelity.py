@@ -180,6 +180,22 @@ def _order_json(order: Any) -> dict[str, Any]:
             "difference": None if iv is None else {"mean": iv.mean, "low": iv.low, "high": iv.high}}
 
 
+def _ranking(args: argparse.Namespace) -> list[Any]:
+    """The synthetic-against-real comparisons (`safl_bench.leaderboard.ranking`) of the records
+    under --results and --records (--results wins for a cell in both)."""
+    from safl_bench.leaderboard.ranking import comparisons
+    from safl_bench.results.records import default_results_dir, load_records
+
+    folders = [*(Path(p).expanduser() for p in args.records),
+               Path(args.results).expanduser() if args.results else default_results_dir()]
+    by_key: dict[Any, Any] = {}
+    for folder in folders:
+        if folder.is_dir():
+            for record in load_records(folder)[0]:
+                by_key[record.key] = record
+    return comparisons(list(by_key.values()))
+
+
 def main(args: argparse.Namespace) -> int:
     from safl_bench.analysis import fidelity as F
     from safl_bench.common.fingerprint import to_jsonable
@@ -337,6 +353,17 @@ def main(args: argparse.Namespace) -> int:
     if any(orders.values()) and any(v is None for v in taus.values()):
         print("  (n/a: on one side every pair of the methods both sides have is tied, so there is "
               "no order to correlate)")
+    comps = _ranking(args) if pr else []
+    if comps:
+        from safl_bench.leaderboard import ranking
+
+        rows = ranking.summary_rows(comps)
+        print("the default's order of the methods against real KITTI's, from the records "
+              "(Recall@1 %, mean over each protocol's tasks; tau-b with its 95 % interval over "
+              "seeds and queries; `safl_bench.leaderboard.ranking`):")
+        print(_table([[r[0], r[1], r[2], r[5], r[6], r[3] + "  |  " + r[4]] for r in rows]))
+        for line in ranking.notes(comps):
+            print(f"  note: {line}")
     print("goals: " + "; ".join(
         f"{g.name} {_fmt(g.value, pct=g.name == 'nonzero_fraction')} (goal {g.target}): {'met' if g.met else 'NOT met'}"
         for g in targets))
@@ -357,6 +384,7 @@ def main(args: argparse.Namespace) -> int:
                              "synthetic": synth_m.stats.mean_nonzero},
             "ranking_tau": taus.get("mean"),
             "goals": {g.name: {"value": g.value, "target": g.target, "met": g.met} for g in targets},
+            "ranking_comparisons": [c.to_json() for c in comps],
             "ranking_tau_per_sequence": {t: v for t, v in taus.items() if t != "mean"},
             "place_recognition": {m: {t: r.to_json() for t, r in per.items()} for m, per in pr.items()},
             "pair_orders": {t: [_order_json(o) for o in per] for t, per in orders.items()},
