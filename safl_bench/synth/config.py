@@ -15,9 +15,14 @@ from safl_bench.errors import ConfigError
 
 #: Bumped whenever the generator's output changes for the same seed and config. Version "1" was
 #: the data of the synthetic tasks' task version v0 (e.g. SAFL/Synth00-T1R1-v0), version "2" that
-#: of v1, version "3" that of v2, version "4" that of v3; version "5" is that of v4. A bump needs
-#: new synthetic task versions in `safl_bench.tasks.builtin`.
-GENERATOR_VERSION = "5"
+#: of v1, version "3" that of v2, version "4" that of v3; version "5" is that of v4 and v5 (paper)
+#: and v4 (revisit); version "6" (routes that obey a loop rule, `synth.routes.ROUTE_RULES`) that of
+#: v6. A bump needs new synthetic task versions in `safl_bench.tasks.builtin`.
+GENERATOR_VERSION = "6"
+#: The data versions this generator can make, oldest first: "5" stays so that its tasks keep
+#: running (its sequences live in their own folder, `synth.default_root`); it differs from "6"
+#: only in the route rule.
+GENERATOR_VERSIONS: tuple[str, ...] = ("5", "6")
 
 DEFAULT_SEED = 0
 #: Test sequences: 00 in the role of KITTI 00 (revisits driving the same way), 09 in that of
@@ -49,6 +54,13 @@ SEQUENCE_SPECS: dict[str, SequenceSpec] = {
     "02": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
     "03": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
     "04": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
+}
+#: Changes to `SEQUENCE_SPECS` per data version. From version 6 sequence 09 has 1000 frames: at
+#: 800 (about 700 m) a walk under the loop rule (`synth.routes.LoopRule`: no loop shorter than
+#: 550 m) rarely fits an opposite-direction revisit on its 4 x 4 grid (1 of data seeds 0-7 found
+#: one in 2000 walks); at 1000 frames all 8 do.
+SEQUENCE_SPEC_CHANGES: dict[str, dict[str, SequenceSpec]] = {
+    "6": {"09": SequenceSpec(frames=1000, grid_lines=4, revisits="opposite")},
 }
 
 
@@ -91,9 +103,9 @@ class SynthConfig:
         if self.beams < 1 or self.max_range_m <= 5 or self.cell_m <= 0:
             raise ConfigError("beams must be >= 1, max_range_m > 5 and cell_m > 0")
 
-    def spec(self, name: str) -> SequenceSpec:
-        """The spec of sequence `name` with this config's overrides applied."""
-        base = SEQUENCE_SPECS.get(name)
+    def spec(self, name: str, version: str = GENERATOR_VERSION) -> SequenceSpec:
+        """The spec of sequence `name` in data `version` with this config's overrides applied."""
+        base = SEQUENCE_SPEC_CHANGES.get(str(version), {}).get(name, SEQUENCE_SPECS.get(name))
         if base is None:
             raise ConfigError(
                 f"unknown synthetic sequence {name!r}; known: {', '.join(ALL_SEQUENCES)}"

@@ -27,11 +27,12 @@ from safl_bench.synth import writer
 from safl_bench.synth.config import (
     ALL_SEQUENCES,
     GENERATOR_VERSION,
+    GENERATOR_VERSIONS,
     SynthConfig,
     sequence_seed,
 )
 from safl_bench.synth.lidar import Lidar
-from safl_bench.synth.routes import Trajectory, plan_trajectory, sensor_poses
+from safl_bench.synth.routes import ROUTE_RULES, Trajectory, plan_trajectory, sensor_poses
 from safl_bench.synth.streets import StreetGrid, make_street_grid
 from safl_bench.synth.world import World, make_world
 
@@ -39,9 +40,22 @@ from safl_bench.synth.world import World, make_world
 WORKERS = 2
 
 
-def default_root(seed: int = 0) -> Path:
-    """Where the default synthetic dataset for `seed` lives."""
-    return paths.synth_root() / f"seed-{seed}"
+def check_version(version: str) -> str:
+    """`version` as a data version this generator makes; DataError naming the ones it does."""
+    version = str(version)
+    if version not in GENERATOR_VERSIONS:
+        raise DataError(f"this safl-bench generates synthetic data versions {', '.join(GENERATOR_VERSIONS)}, "
+                        f"not {version!r}")
+    return version
+
+
+def default_root(seed: int = 0, version: str = GENERATOR_VERSION) -> Path:
+    """Where the default synthetic dataset for `seed` lives: `seed-<seed>` for data version 5
+    (where it always lived, so its caches stay valid), `v<version>/seed-<seed>` for the others."""
+    version = check_version(version)
+    if version == "5":
+        return paths.synth_root() / f"seed-{seed}"
+    return paths.synth_root() / f"v{version}" / f"seed-{seed}"
 
 
 @dataclass
@@ -51,6 +65,7 @@ class Scene:
     name: str
     seed: int
     config: SynthConfig
+    version: str
     grid: StreetGrid
     trajectory: Trajectory
     poses: np.ndarray  # (n,4,4) world poses of the LiDAR
@@ -63,17 +78,19 @@ class Scene:
         return rel
 
 
-def make_route(name: str, seed: int = 0, config: SynthConfig | None = None) -> Scene:
-    """The streets and route of a sequence, without drawing the town (cheap)."""
+def make_route(name: str, seed: int = 0, config: SynthConfig | None = None,
+               version: str = GENERATOR_VERSION) -> Scene:
+    """The streets and route of a sequence of data `version`, without drawing the town (cheap)."""
     config = config or SynthConfig()
-    spec = config.spec(name)
+    version = check_version(version)
+    spec = config.spec(name, version)
     # streets, town, route, sensor, lateral wander (the fifth, added in data version 3, leaves
     # the first four as they were)
     rngs = [np.random.default_rng(s) for s in sequence_seed(seed, name).spawn(5)]
     grid = make_street_grid(spec.grid_lines, rngs[0])
     traj = plan_trajectory(grid, spec.frames, rngs[2], wander_rng=rngs[4], revisits=spec.revisits,
-                           rate_hz=config.rate_hz)
-    return Scene(name, seed, config, grid, traj, sensor_poses(traj, config.sensor_height_m), rngs)
+                           rate_hz=config.rate_hz, rule=ROUTE_RULES[version])
+    return Scene(name, seed, config, version, grid, traj, sensor_poses(traj, config.sensor_height_m), rngs)
 
 
 def make_scene_world(scene: Scene) -> tuple[World, Lidar]:
@@ -82,16 +99,17 @@ def make_scene_world(scene: Scene) -> tuple[World, Lidar]:
     return world, Lidar(scene.config, scene.rngs[3])
 
 
-def _expected_manifest(name: str, seed: int, config: SynthConfig) -> dict[str, Any]:
+def _expected_manifest(name: str, seed: int, config: SynthConfig, version: str) -> dict[str, Any]:
     return {
-        "generator_version": GENERATOR_VERSION,
+        "generator_version": version,
         "sequence": name,
         "seed": int(seed),
         "config": to_jsonable(config),
     }
 
 
-def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None) -> bool:
+def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None,
+               version: str = GENERATOR_VERSION) -> bool:
     """Whether sequence `name` under `root` is complete and made with these settings."""
     config = config or SynthConfig()
     path = writer.manifest_path(root, name)
@@ -99,7 +117,7 @@ def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None 
         manifest = json.loads(path.read_text())
     except (OSError, ValueError):
         return False
-    expected = _expected_manifest(name, seed, config)
+    expected = _expected_manifest(name, seed, config, version)
     if any(manifest.get(k) != v for k, v in expected.items()):
         return False
     sizes = manifest.get("scan_bytes", [])
@@ -120,10 +138,11 @@ def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None 
 
 
 def generate_sequence(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None,
-                      on_frame: Callable[[], None] | None = None) -> None:
-    """Generate sequence `name` under `root` (overwriting whatever is there)."""
+                      on_frame: Callable[[], None] | None = None,
+                      version: str = GENERATOR_VERSION) -> None:
+    """Generate sequence `name` of data `version` under `root` (overwriting whatever is there)."""
     config = config or SynthConfig()
-    scene = make_route(name, seed, config)
+    scene = make_route(name, seed, config, version)
     manifest = writer.manifest_path(root, name)
     manifest.unlink(missing_ok=True)  # from here on the sequence reads as incomplete
     velodyne = writer.sequence_dir(root, name) / "velodyne"
@@ -144,7 +163,7 @@ def generate_sequence(root: Path, name: str, seed: int = 0, config: SynthConfig 
             on_frame()
     digests = writer.write_text_files(root, name, scene.lidar_poses(), scene.trajectory.times)
     atomic_write_json(manifest, {
-        **_expected_manifest(name, seed, config),
+        **_expected_manifest(name, seed, config, scene.version),
         "frames": n,
         "scan_bytes": sizes,
         "text_sha256": digests,
@@ -152,23 +171,25 @@ def generate_sequence(root: Path, name: str, seed: int = 0, config: SynthConfig 
 
 
 def ensure(root: Path, sequences: Sequence[str], seed: int = 0, progress: bool = True,
-           config: SynthConfig | None = None) -> None:
-    """Generate the sequences under `root` that are missing or stale; keep the others."""
+           config: SynthConfig | None = None, version: str = GENERATOR_VERSION) -> None:
+    """Generate the sequences of data `version` under `root` that are missing or stale; keep
+    the others."""
     config = config or SynthConfig()
+    version = check_version(version)
     root = Path(root)
     if root.exists() and not root.is_dir():
         raise DataError(f"synthetic data root {root} exists and is not a directory")
     for name in sequences:
         config.spec(name)  # unknown names fail before any work
-    todo = [n for n in dict.fromkeys(sequences) if not is_current(root, n, seed, config)]
+    todo = [n for n in dict.fromkeys(sequences) if not is_current(root, n, seed, config, version)]
     if not todo:
         return
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DataError(f"cannot create synthetic data root {root}: {exc}") from exc
-    todo.sort(key=lambda n: -config.spec(n).frames)  # longest first balances the threads
-    total = sum(config.spec(n).frames for n in todo)
+    todo.sort(key=lambda n: -config.spec(n, version).frames)  # longest first balances the threads
+    total = sum(config.spec(n, version).frames for n in todo)
     lock = threading.Lock()
     stop = threading.Event()  # set on an interrupt so the worker threads end early
     bar = None
@@ -186,7 +207,7 @@ def ensure(root: Path, sequences: Sequence[str], seed: int = 0, progress: bool =
 
     try:
         with ThreadPoolExecutor(max_workers=min(WORKERS, len(todo))) as pool:
-            futures = [pool.submit(generate_sequence, root, n, seed, config, tick) for n in todo]
+            futures = [pool.submit(generate_sequence, root, n, seed, config, tick, version) for n in todo]
             try:
                 for f in futures:
                     f.result()
@@ -198,4 +219,4 @@ def ensure(root: Path, sequences: Sequence[str], seed: int = 0, progress: bool =
             bar.close()
 
 
-__all__ = ["ALL_SEQUENCES", "default_root", "ensure", "generate_sequence", "is_current"]
+__all__ = ["ALL_SEQUENCES", "check_version", "default_root", "ensure", "generate_sequence", "is_current"]

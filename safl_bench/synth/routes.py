@@ -25,6 +25,20 @@ synthetic revisits: with the wander alone added to version 2's towns (seeds 0 an
 weights), single-frame revisit F1max fell 0.860 -> 0.816 and 0.754 -> 0.704 for SAD, 0.846 ->
 0.827 and 0.892 -> 0.862 for Stable-AFL, 0.903 -> 0.879 and 0.923 -> 0.923 for BiGAN. The
 wander is drawn from its own generator, so a seed's town and walk are those of version 2.
+
+From data version 6 a walk obeys a loop rule (`LoopRule`, `ROUTE_RULES`): it never comes back to
+a crossing after less than `MIN_LOOP_M` of driving, and drives no street a third time the same
+way. Up to version 5 the walk only had to revisit, and circling one block is the easiest walk
+that does: every revisit of sequence 00 came after a lap of one block (the shortest and the
+median loop 322-399 m, seeds 0-5, so 8-25 % of its frames lay on such a lap; `laps` in the
+fidelity report), and seed 0 drove about 1.5 laps of one block, six near-identical sides. KITTI
+comes back only through other streets: its shortest loops (driving between two passes of a
+place within 5 m, more than 30 s apart) are 795 m on 00, 1321 m on 02, 556 m on 05 and 927 m on
+06 (ground-truth poses), and a third pass of a place is rare (1.2 % of the frames of 00, 0.3 %
+of 05, none on 02 and 06). `MIN_LOOP_M` is the shortest of those loops, rounded down; it rules
+out the lap of one block (280-460 m on these towns' 70-115 m blocks) and most loops around two.
+`MAX_PASSES` is 02's and 06's count, which keeps a route from repeating a loop. Both were fixed
+on the route statistics alone, before any method was run on the new data.
 """
 
 from __future__ import annotations
@@ -42,6 +56,24 @@ from safl_bench.synth.world import LANE_OFFSET_M
 
 _DIRS = ((1, 0), (0, 1), (-1, 0), (0, -1))  # east, north, west, south in plan grid steps
 TURN_RADIUS_M = 9.0
+#: The loop rule of data version 6 (module doc): the least driving, metres, between two visits of
+#: a crossing, and the most times a street may be driven the same way.
+MIN_LOOP_M = 550.0
+MAX_PASSES = 2
+
+
+@dataclass(frozen=True)
+class LoopRule:
+    """What a walk may not do (module doc): come back to a crossing within `min_loop_m` metres
+    of driving (plan-frame street lengths between crossings), or drive a street the same way
+    more than `max_passes` times."""
+
+    min_loop_m: float = MIN_LOOP_M
+    max_passes: int = MAX_PASSES
+
+
+#: The route rule of each synthetic data version the generator makes (None: the walk is free).
+ROUTE_RULES: dict[str, LoopRule | None] = {"5": None, "6": LoopRule()}
 #: What a route must revisit (`plan_trajectory`): each kind's test on whether the walk drives some
 #: street again the same way and the opposite way (`walk_revisits`).
 REVISIT_TESTS: dict[str, Callable[[bool, bool], bool]] = {
@@ -88,11 +120,20 @@ class Trajectory:
         return len(self.times)
 
 
-def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator) -> list[tuple[int, int]]:
-    """A walk over an nu x nv grid of crossings with n_edges steps and no U-turns."""
+def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator,
+                rule: LoopRule | None = None,
+                lines: tuple[np.ndarray, np.ndarray] | None = None) -> list[tuple[int, int]] | None:
+    """A walk over an nu x nv grid of crossings with n_edges steps and no U-turns.
+
+    With a `rule` (which needs the street `lines`, plan u and v of the crossings) a step may only
+    go where the rule allows; a walk left with nowhere to go is None. Without one the draws are
+    those of data versions up to 5."""
     node = (int(rng.integers(0, nu)), int(rng.integers(0, nv)))
     walk = [node]
     heading = -1
+    driven = 0.0
+    last_seen = {node: 0.0}
+    passes: dict[tuple[tuple[int, int], tuple[int, int]], int] = {}
     for _ in range(n_edges):
         options, weights = [], []
         turns = ((0, 0.5), (1, 0.25), (3, 0.25)) if heading >= 0 else tuple((t, 1.0) for t in range(4))
@@ -100,15 +141,43 @@ def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator) -> lis
             h = (max(heading, 0) + turn) % 4
             nxt = (node[0] + _DIRS[h][0], node[1] + _DIRS[h][1])
             if 0 <= nxt[0] < nu and 0 <= nxt[1] < nv:
+                if rule is not None and not _allowed(rule, lines, node, nxt, driven, last_seen, passes):
+                    continue
                 options.append((h, nxt))
                 weights.append(w)
+        if not options and rule is not None:
+            return None
         if not options:  # a dead end only at a 1-wide grid: turn around
             h = (heading + 2) % 4
             options, weights = [(h, (node[0] + _DIRS[h][0], node[1] + _DIRS[h][1]))], [1.0]
         p = np.asarray(weights) / np.sum(weights)
-        heading, node = options[int(rng.choice(len(options), p=p))]
+        heading, nxt = options[int(rng.choice(len(options), p=p))]
+        if rule is not None:
+            driven += _street_length(lines, node, nxt)
+            last_seen[nxt] = driven
+            passes[(node, nxt)] = passes.get((node, nxt), 0) + 1
+        node = nxt
         walk.append(node)
     return walk
+
+
+def _street_length(lines: tuple[np.ndarray, np.ndarray] | None, a: tuple[int, int],
+                   b: tuple[int, int]) -> float:
+    """Plan length of the street between neighbouring crossings a and b."""
+    if lines is None:
+        raise ConfigError("a loop rule needs the street lines of the grid")
+    u, v = lines
+    return float(abs(u[a[0]] - u[b[0]]) + abs(v[a[1]] - v[b[1]]))
+
+
+def _allowed(rule: LoopRule, lines: tuple[np.ndarray, np.ndarray] | None, node: tuple[int, int],
+             nxt: tuple[int, int], driven: float, last_seen: dict[tuple[int, int], float],
+             passes: dict[tuple[tuple[int, int], tuple[int, int]], int]) -> bool:
+    """Whether `rule` lets a walk at `node`, `driven` metres in, go on to `nxt`."""
+    if passes.get((node, nxt), 0) >= rule.max_passes:
+        return False
+    seen = last_seen.get(nxt)
+    return seen is None or driven + _street_length(lines, node, nxt) - seen >= rule.min_loop_m
 
 
 def walk_revisits(walk: list[tuple[int, int]]) -> tuple[bool, bool]:
@@ -219,13 +288,13 @@ def _drive(grid: StreetGrid, walk: list[tuple[int, int]], frames: int, cruise: f
 
 def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
                     wander_rng: np.random.Generator, revisits: str = "none",
-                    rate_hz: float = 10.0) -> Trajectory:
+                    rate_hz: float = 10.0, rule: LoopRule | None = None) -> Trajectory:
     """Poses of `frames` scans at `rate_hz` along a random route through `grid`.
 
     `revisits` is "same" (drive some street again the same way and none the opposite way),
     "opposite" (drive some street again the opposite way), "both" (both kinds), "any" (one of
     the two) or "none". `wander_rng` draws the lateral wander in the lane (`lane_wander`); `rng`
-    everything else.
+    everything else. `rule` is the loop rule every walk obeys (`ROUTE_RULES`; None: none).
     """
     if revisits not in REVISITS:
         raise ConfigError(f"revisits must be one of {', '.join(map(repr, REVISITS))}, got {revisits!r}")
@@ -241,8 +310,8 @@ def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
     needed = frames / rate_hz * (cruise + 1.5) + 2 * spacing  # upper bound on the distance
     n_edges = int(np.ceil(needed / spacing)) + 1
     for _ in range(2000):
-        walk = random_walk(nu, nv, n_edges, rng)
-        if not accept(walk):
+        walk = random_walk(nu, nv, n_edges, rng, rule, (grid.u_lines, grid.v_lines))
+        if walk is None or not accept(walk):
             continue
         x, y, s, heading, pos, ends = _drive(grid, walk, frames, cruise, rate_hz, rng, wander_rng)
         if pos[-1] > s[-1]:  # pragma: no cover - the walk length is an upper bound
