@@ -10,6 +10,7 @@ import pytest
 
 from safl_bench import fidelity as F
 from safl_bench.cli import main
+from safl_bench.errors import DataError
 
 
 def _image(seed: int, size: int = 64, density: float = 0.1) -> np.ndarray:
@@ -52,7 +53,7 @@ def test_distance_and_heading_curves_of_hand_made_images() -> None:
     positions = np.array([[0, 0], [1, 0], [150, 0], [151, 0], [300, 0], [5, 0]], float)
     headings = np.radians([0, 100, 0, 0, 0, 0])
     desc = F.describe(images, "sad")
-    curve, turn, same_way = F.pair_curves(desc, "sad", positions, headings)
+    curve, turn, same_way, _ = F.pair_curves(desc, "sad", positions, headings)
     d = F.differences(desc, desc, "sad")
     far = [d[i, j] for i in range(6) for j in range(i + 1, 6) if abs(positions[i, 0] - positions[j, 0]) > 100]
     assert len(far) == 11 and curve.far_median == pytest.approx(float(np.median(far)))
@@ -66,6 +67,53 @@ def test_distance_and_heading_curves_of_hand_made_images() -> None:
     assert same_way.counts[0] == 1 and same_way.counts[2] == 1
     assert same_way.values[2] == pytest.approx(d[0, 5] / curve.far_median)
     assert same_way.far_median == curve.far_median
+
+
+def test_aliasing_counts_far_pairs_more_alike_than_the_street_ahead() -> None:
+    """Far pairs below the median same-way difference at 10-12 m: here place A seen again
+    200 m away, from both frames of its street; the unrelated places are not alike."""
+    a, c = _image(1), _image(3)
+    a2, c2 = a.copy(), c.copy()
+    a2[10:20, 10:20] = 255  # the street 11 m on: a little changed
+    c2[10:30, 10:30] = 255  # a little more
+    images = np.stack([a, a2, a, c, c2])
+    positions = np.array([[0, 0], [11, 0], [200, 0], [400, 0], [411, 0]], float)
+    desc = F.describe(images, "sad")
+    curves = F.pair_curves(desc, "sad", positions, np.zeros(5))
+    far = [(i, j) for i in range(5) for j in range(i + 1, 5) if abs(positions[i, 0] - positions[j, 0]) > 100]
+    d = F.differences(desc, desc, "sad")
+    ref = np.median([d[0, 1], d[3, 4]])
+    assert curves.alias_share == pytest.approx(np.mean([d[i, j] < ref for i, j in far]))
+    assert len(far) == 8 and curves.alias_share == pytest.approx(2 / 8)  # (0, 2) and (1, 2)
+    assert F.pair_curves(desc[:3:2], "sad", positions[:3:2], np.zeros(2)).alias_share is None
+
+
+def test_route_measures_of_a_lap_and_of_a_long_loop() -> None:
+    """A 400 m square driven twice at 10 m/s: every frame of the second lap revisits after a
+    400 m loop (a short lap); a 1200 m square driven 1.5 times: loops of 1200 m, none short."""
+    def square(side: float, laps: float) -> tuple[np.ndarray, np.ndarray]:
+        s = np.arange(0.0, 4 * side * laps, 1.0)
+        u = s % (4 * side)
+        k, r = (u // side).astype(int), u % side
+        corners = np.array([[0, 0], [side, 0], [side, side], [0, side], [0, 0]], float)
+        xy = corners[k] + (corners[k + 1] - corners[k]) * (r / side)[:, None]
+        return xy, s / 10.0
+
+    xy, t = square(100.0, 2)
+    lap = F.route_measures(xy, t)
+    # the latest earlier pass within 5 m lies up to 5 m ahead of the frame: loops of 395-400 m
+    assert lap.loop_min_m == pytest.approx(397, abs=5) and lap.loop_median_m == pytest.approx(397, abs=3)
+    assert lap.revisit_share == pytest.approx(lap.short_lap_share) and 0.45 < lap.short_lap_share < 0.52
+    assert lap.third_pass_share < 0.01 and lap.gap_median_s == pytest.approx(39.5, abs=0.3)
+    xy, t = square(300.0, 1.5)
+    loop = F.route_measures(xy, t)
+    assert loop.short_lap_share == 0.0 and loop.loop_min_m == pytest.approx(1197, abs=5)
+    xy, t = square(100.0, 3)
+    assert F.route_measures(xy, t).third_pass_share > 0.3
+    none = F.route_measures(np.stack([np.arange(50.0), np.zeros(50)], axis=1), np.arange(50.0))
+    assert none.revisit_share == 0.0 and none.loop_min_m is None
+    with pytest.raises(DataError, match="as many times as positions"):
+        F.route_measures(np.zeros((3, 2)), np.zeros(2))
 
 
 def test_polar_descriptor_is_rotation_invariant_and_sad_is_not() -> None:

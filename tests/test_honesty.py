@@ -80,11 +80,11 @@ BIGAN_V5 = pytest.mark.xfail(strict=True, reason="shipped BiGAN (data v5): +0.03
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [pytest.param("bigan@1", marks=BIGAN_V5), "stable_afl@1"])  # version 1 ships synthetic weights
 def test_shipped_weights_beat_the_untrained_network_on_the_default(name: str) -> None:
-    """The shipped weights against the same network untrained on SAFL/Synth00-T1R1-v5 (single
+    """The shipped weights against the same network untrained on SAFL/Synth00-T1R1-v6 (single
     frame ROC AUC; generates the default's sequence 00 when missing, about a minute)."""
     from safl_bench.method_registry import make_method
 
-    task = tasks.make("SAFL/Synth00-T1R1-v5", progress=False)
+    task = tasks.make("SAFL/Synth00-T1R1-v6", progress=False)
     shipped = _single_frame_auc(make_method(name, source="synth"), task)  # @2 ships no synthetic weights
     untrained = _single_frame_auc(make_method(name, weights="untrained", source="synth"), task)
     assert shipped > untrained + 0.05, (shipped, untrained)

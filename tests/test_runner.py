@@ -142,9 +142,9 @@ def test_resolve_tasks_expands_suites():
     assert len(paper) == 12 and all(t.startswith("SAFL/Synth00-") for t in paper)
     kitti = runner.resolve_tasks(["paper"], source="kitti")
     assert all(t.startswith("SAFL/KITTI00-") for t in kitti)
-    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v5", "paper"])
-    assert mixed[0] == "SAFL/Synth00-T1R1-v5" and len(mixed) == 12
-    assert all(t.endswith("-v5") for t in paper)
+    mixed = runner.resolve_tasks(["SAFL/Synth00-T1R1-v6", "paper"])
+    assert mixed[0] == "SAFL/Synth00-T1R1-v6" and len(mixed) == 12
+    assert all(t.endswith("-v6") for t in paper)
 
 
 def test_the_views_of_all_cells_are_rendered_in_one_pass(tiny_tasks, kitti_root, tmp_path, monkeypatch):

@@ -37,9 +37,9 @@ def _options(kitti_root: Path, results: Path) -> runner.RunOptions:
 
 def test_noisy_tasks_declare_five_seeds_and_fixed_ones_one() -> None:
     assert DEFAULT_NOISY_SEEDS == 5
-    assert spec("SAFL/Synth00-T1R1-v5").seeds == (0, 1, 2, 3, 4)
+    assert spec("SAFL/Synth00-T1R1-v6").seeds == (0, 1, 2, 3, 4)
     assert spec("SAFL/BEVKITTI00-T20R2-v1").seeds == (0, 1, 2, 3, 4)
-    for fixed in ("SAFL/Synth00-Revisit-v4", "SAFL/BEVKITTI00-BEVPlace-v1", "SAFL/Synth00-T0R0-v5"):
+    for fixed in ("SAFL/Synth00-Revisit-v6", "SAFL/BEVKITTI00-BEVPlace-v1", "SAFL/Synth00-T0R0-v6"):
         assert spec(fixed).seeds == (0,), fixed
 
 
@@ -58,7 +58,7 @@ def test_a_task_can_declare_its_seed_count_and_a_bad_one_is_refused() -> None:
 
 
 def test_cell_seeds_follow_the_task_unless_overridden() -> None:
-    noisy, fixed = spec("SAFL/Synth00-T5R1-v5"), spec("SAFL/Synth00-Revisit-v4")
+    noisy, fixed = spec("SAFL/Synth00-T5R1-v6"), spec("SAFL/Synth00-Revisit-v6")
     assert runner.cell_seeds(noisy) == (0, 1, 2, 3, 4)
     assert runner.cell_seeds(noisy, n_seeds=2) == (0, 1)
     assert runner.cell_seeds(fixed, n_seeds=3) == (0,)  # nothing random: one seed is the cell

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 
 from safl_bench import synth
 from safl_bench.cli import main as cli_main
-from safl_bench.errors import ConfigError
+from safl_bench.errors import ConfigError, DataError
 from safl_bench.synth.routes import plan_trajectory, revisit_kinds, walk_revisits
 from safl_bench.synth.streets import make_street_grid
 
@@ -121,6 +122,54 @@ def test_route_revisit_kinds(revisits: str) -> None:
                                wander_rng=np.random.default_rng(seed), revisits=revisits)
         same, opposite = walk_revisits(list(traj.nodes))
         assert {"same": same and not opposite, "opposite": opposite, "both": same and opposite}[revisits]
+
+
+#: SHA-256 (first 16 hex) of data version 5's route of 00, seed 0, as that version made it.
+ROUTE_00_V5 = "5d7038f24fe175a8"
+
+
+def _loops_and_passes(scene: synth.generate.Scene) -> tuple[float, int]:
+    """The shortest plan-frame driving between two visits of a crossing in a scene's walk, and
+    the most times one street was driven the same way."""
+    grid, walk = scene.grid, list(scene.trajectory.nodes)
+    driven, seen, shortest = 0.0, {walk[0]: 0.0}, np.inf
+    edges: dict[tuple[tuple[int, int], tuple[int, int]], int] = {}
+    for a, b in itertools.pairwise(walk):
+        driven += abs(grid.u_lines[a[0]] - grid.u_lines[b[0]]) + abs(grid.v_lines[a[1]] - grid.v_lines[b[1]])
+        if b in seen:
+            shortest = min(shortest, driven - seen[b])
+        seen[b] = driven
+        edges[(a, b)] = edges.get((a, b), 0) + 1
+    return float(shortest), max(edges.values())
+
+
+def test_data_version_6_routes_come_back_through_other_streets() -> None:
+    """Version 6's walks obey the loop rule on every default sequence (no lap of one block, no
+    street a third time); version 5's route of 00 is the one it always was, a lap of a block."""
+    from safl_bench.analysis.fidelity import route_measures
+    from safl_bench.synth.routes import MAX_PASSES, MIN_LOOP_M
+
+    for seed in range(3):
+        for name in synth.ALL_SEQUENCES:
+            scene = synth.make_route(name, seed, version="6")
+            shortest, passes = _loops_and_passes(scene)
+            assert shortest >= MIN_LOOP_M and passes <= MAX_PASSES, (seed, name)
+            route = route_measures(scene.trajectory.xy, scene.trajectory.times)
+            assert route.short_lap_share == 0.0 and route.third_pass_share == 0.0, (seed, name)
+    old = synth.make_route("00", 0, version="5")
+    assert hashlib.sha256(old.trajectory.xy.tobytes()).hexdigest()[:16] == ROUTE_00_V5
+    assert _loops_and_passes(old)[0] < MIN_LOOP_M
+    assert route_measures(old.trajectory.xy, old.trajectory.times).short_lap_share > 0.2
+    assert synth.SynthConfig().spec("09", "5").frames == 800
+    assert synth.SynthConfig().spec("09", "6").frames == 1000
+
+
+def test_each_data_version_has_its_own_folder(safl_home: Path) -> None:
+    assert synth.default_root(0, "5") == safl_home / "synth" / "seed-0"
+    assert synth.default_root(2, "6") == safl_home / "synth" / "v6" / "seed-2"
+    assert synth.default_root(1) == synth.default_root(1, synth.GENERATOR_VERSION)
+    with pytest.raises(DataError, match=r"generates synthetic data versions 5, 6, not '4'"):
+        synth.ensure(safl_home / "x", ["01"], version="4")
 
 
 def test_route_revisit_kind_unknown() -> None:

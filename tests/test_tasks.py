@@ -49,15 +49,15 @@ def temp_register() -> Iterator[Callable[..., TaskSpec]]:
 
 def test_builtin_suites_cover_the_paper_and_revisit() -> None:
     paper = tasks.suite("paper", source="synth")
-    assert paper == [f"SAFL/Synth00-{c.name}-v5" for c in PAPER_CONDITIONS]
+    assert paper == [f"SAFL/Synth00-{c.name}-v6" for c in PAPER_CONDITIONS]
     full_kitti = tasks.suite("paper-full", source="kitti")
     for seq in ("00", "09"):
         assert [f"SAFL/KITTI{seq}-{c.name}-v1" for c in PAPER_CONDITIONS] == [
             i for i in full_kitti if i.startswith(f"SAFL/KITTI{seq}")
         ]
     assert set(tasks.suite("revisit")) == {
-        "SAFL/Synth00-Revisit-v4",
-        "SAFL/Synth09-Revisit-v4",
+        "SAFL/Synth00-Revisit-v6",
+        "SAFL/Synth09-Revisit-v6",
         "SAFL/KITTI00-Revisit-v0",
         "SAFL/KITTI05-Revisit-v0",
         "SAFL/KITTI08-Revisit-v0",
@@ -71,7 +71,7 @@ def test_builtin_suites_cover_the_paper_and_revisit() -> None:
         30.0,
         CLEAN,
     )
-    spec = tasks.spec("SAFL/Synth09-T20R2-v5")
+    spec = tasks.spec("SAFL/Synth09-T20R2-v6")
     assert (spec.condition, spec.step, spec.tp_radius_m, spec.window_s) == (
         Condition(20, 2),
         4,
@@ -105,8 +105,10 @@ def test_unknown_ids_suggest_close_ones() -> None:
         tasks.spec("SAFL/KITI00-T5R1.5-v0")
     with pytest.raises(RegistryError, match="unknown task"):
         tasks.make("nothing like it")
-    with pytest.raises(RegistryError, match="no version v6; registered versions: v0, v1, v2, v3, v4, v5"):
-        tasks.spec("SAFL/Synth00-T1R1-v6")
+    with pytest.raises(RegistryError, match="no version v7; registered versions: v0, v1, v2, v3, v4, v5, v6"):
+        tasks.spec("SAFL/Synth00-T1R1-v7")
+    with pytest.raises(RegistryError, match="no version v5; registered versions: v0, v1, v2, v3, v4, v6"):
+        tasks.spec("SAFL/Synth00-Revisit-v5")  # skipped: v6 is data version 6 in both protocols
 
 
 def test_duplicates_versions_and_fingerprints(temp_register: Callable[..., TaskSpec]) -> None:
@@ -146,12 +148,16 @@ def test_synthetic_tasks_name_their_data_version_in_the_fingerprint() -> None:
     from safl_bench.synth import GENERATOR_VERSION
 
     assert TASK_VERSION["paper"]["synth"] == max(SYNTH_DATA_VERSIONS)
-    assert SYNTH_DATA_VERSIONS[TASK_VERSION["paper"]["synth"]] == GENERATOR_VERSION == "5"
+    assert SYNTH_DATA_VERSIONS[TASK_VERSION["paper"]["synth"]] == GENERATOR_VERSION == "6"
     assert SYNTH_DATA_VERSIONS[TASK_VERSION["revisit"]["synth"]] == GENERATOR_VERSION
     old, mid, v2, v3, new = (tasks.registry[f"SAFL/Synth00-T1R1-v{v}"] for v in (0, 1, 2, 3, 4))
     assert (old.data_version, mid.data_version, v2.data_version, v3.data_version,
             new.data_version) == ("1", "2", "3", "4", "5")
     assert new.definition()["data_version"] == "5" and new.to_dict()["data_version"] == "5"
+    v6 = tasks.registry["SAFL/Synth00-T1R1-v6"]
+    assert v6.definition()["data_version"] == "6"
+    assert tasks.registry["SAFL/Synth09-Revisit-v6"].data_version == "6"
+    assert tasks.registry["SAFL/Synth09-Revisit-v4"].data_version == "5"
     assert v3.definition()["data_version"] == "4" and v3.fingerprint == SYNTH_T1R1_V3
     assert v2.definition()["data_version"] == "3" and v2.fingerprint == SYNTH_T1R1_V2
     assert mid.definition()["data_version"] == "2"
@@ -186,7 +192,10 @@ def test_suites_hold_only_the_current_versions() -> None:
     scored_every_query = [i for i, s in tasks.registry.items() if i.startswith("SAFL/")
                           and s.protocol in ("paper", "bevplace") and not s.context_queries
                           and i not in old_data]
-    assert sorted(superseded()) == sorted(old_data + scored_every_query)
+    data_5 = [i for i, s in tasks.registry.items() if i.startswith("SAFL/Synth")
+              and s.data_version == "5" and s.context_queries + (s.protocol == "revisit") > 0]
+    assert sorted(superseded()) == sorted(old_data + scored_every_query + data_5)
+    assert len(data_5) == 26 + 2  # paper v5 (2 x 13) and revisit v4, on data version 5
     assert len(old_data) == 112  # 4 old versions x (2 x (12 conditions + T0R0) + 2 revisit)
     # synthetic paper v4 (2 x 13), KITTI paper v0 (2 x 13), top-view paper v0 (13), BEVPlace v0 (4)
     assert len(scored_every_query) == 26 + 26 + 13 + 4
@@ -197,19 +206,21 @@ def test_suites_hold_only_the_current_versions() -> None:
             spec = tasks.registry[i]
             assert spec.context_queries == (10 if spec.protocol != "revisit" else 0), i
     assert len(tasks.suite("all", source="synth")) == 28
-    assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v5",
-                                                          "SAFL/Synth09-T0R0-v5"}
-    with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v5"):
-        assert tasks.spec("SAFL/Synth00-T1R1").id == "SAFL/Synth00-T1R1-v5"
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-T1R1-v5"):
+    assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v6",
+                                                          "SAFL/Synth09-T0R0-v6"}
+    with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v6"):
+        assert tasks.spec("SAFL/Synth00-T1R1").id == "SAFL/Synth00-T1R1-v6"
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-T1R1-v6"):
         assert tasks.spec("SAFL/Synth00-T1R1-v4").data_version == "5"  # records resolve
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v6"):
+        assert tasks.spec("SAFL/Synth00-Revisit-v4").data_version == "5"  # and still run
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v6"):
         assert tasks.spec("SAFL/Synth00-Revisit-v0").data_version == "1"  # records resolve
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v6"):
         assert tasks.spec("SAFL/Synth00-Revisit-v1").data_version == "2"
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v6"):
         assert tasks.spec("SAFL/Synth00-Revisit-v2").data_version == "3"
-    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v4"):
+    with pytest.warns(UserWarning, match="superseded by SAFL/Synth00-Revisit-v6"):
         assert tasks.spec("SAFL/Synth00-Revisit-v3").data_version == "4"
 
 
@@ -228,18 +239,20 @@ def test_the_new_versions_differ_from_the_old_only_by_their_context_queries() ->
         a, b = tasks.registry[old].definition(), tasks.registry[new].definition()
         assert {k: v for k, v in b.items() if k != "context_queries"} == a
         assert b["context_queries"] == 10 and "context_queries" not in a
-    for other in ("SAFL/Synth00-T1R1-v3", "SAFL/Synth00-Revisit-v4", "SAFL/BEVKITTI00-T1R1-v1",
+    for other in ("SAFL/Synth00-T1R1-v3", "SAFL/Synth00-T1R1-v5", "SAFL/Synth00-Revisit-v4",
+                  "SAFL/BEVKITTI00-T1R1-v1",
                   "SAFL/BEVKITTI00-Revisit-v0", "nothing"):
         assert successor(other) is None
     assert predecessor("SAFL/Synth00-Revisit-v4") is None
+    assert predecessor("SAFL/Synth00-T1R1-v6") is None  # other data, not a successor
     with pytest.raises(ConfigError, match="context_queries must be an integer >= 0"):
         TaskSpec(id="Test/A-v0", source="synth", sequence="00", context_queries=-1)
 
 
 OLD_DATA = (r"^SAFL/Synth00-T1R1-v0 was defined on synthetic data version 1; this safl-bench "
-            r"generates version 5: run SAFL/Synth00-T1R1-v5 ")
+            r"generates versions 5, 6: run SAFL/Synth00-T1R1-v6 ")
 V1_DATA = (r"^SAFL/Synth00-T1R1-v1 was defined on synthetic data version 2; this safl-bench "
-           r"generates version 5: run SAFL/Synth00-T1R1-v5 ")
+           r"generates versions 5, 6: run SAFL/Synth00-T1R1-v6 ")
 
 
 def test_an_old_synthetic_task_cannot_be_materialised(tmp_path: Path) -> None:
@@ -255,7 +268,7 @@ def test_an_old_synthetic_task_cannot_be_materialised(tmp_path: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # gymnasium's own "out of date" warning
         for old in ("v0", "v1", "v2", "v3"):
-            with pytest.raises(ConfigError, match="run SAFL/Synth09-Revisit-v4"):
+            with pytest.raises(ConfigError, match="run SAFL/Synth09-Revisit-v6"):
                 gymnasium.make(f"SAFL/Synth09-Revisit-{old}").reset(seed=0)
     source = SynthSource(root=tmp_path, label="given", seed=0)
     with pytest.raises(ConfigError, match=OLD_DATA):  # whatever source it is given
@@ -274,17 +287,17 @@ def test_an_old_synthetic_task_cannot_be_run(
                      "--results", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("safl-bench: error: SAFL/Synth00-T1R1-v0 was")
-    assert "run SAFL/Synth00-T1R1-v5" in err[0]
+    assert "run SAFL/Synth00-T1R1-v6" in err[0]
     assert cli_main(["run", "--method", "sad", "--task", "SAFL/Synth00-T1R1-v1",
                      "--results", str(tmp_path), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("safl-bench: error: SAFL/Synth00-T1R1-v1 was")
-    assert "run SAFL/Synth00-T1R1-v5" in err[0]
+    assert "run SAFL/Synth00-T1R1-v6" in err[0]
     with pytest.raises(ConfigError, match=OLD_DATA):
         runner.resolve_tasks(["SAFL/Synth00-T1R1-v0"])
     with pytest.raises(ConfigError, match=V1_DATA):
         runner.resolve_tasks(["SAFL/Synth00-T1R1-v1"])
-    assert runner.resolve_tasks(["sanity"]) == ["SAFL/Synth00-T0R0-v5", "SAFL/Synth09-T0R0-v5"]
+    assert runner.resolve_tasks(["sanity"]) == ["SAFL/Synth00-T0R0-v6", "SAFL/Synth09-T0R0-v6"]
     options = runner.RunOptions(results_dir=tmp_path, progress=False)
     with pytest.raises(ConfigError, match=OLD_DATA):
         runner.run_cell(make_method("sad"), "SAFL/Synth00-T1R1-v0", options, log=print)
@@ -296,7 +309,7 @@ def test_an_old_synthetic_task_cannot_be_run(
     assert [(o.task_id, o.seed) for o in outcomes] == [  # each of the tasks' five seeds fails
         (t, seed) for seed in range(5) for t in ("SAFL/Synth00-T1R1-v0", "SAFL/Synth00-T1R1-v1")]
     for outcome in outcomes:
-        assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v5" in outcome.message
+        assert outcome.status == "failed" and "run SAFL/Synth00-T1R1-v6" in outcome.message
     assert not any(tmp_path.iterdir())  # nothing made, nothing written
 
 
@@ -338,7 +351,7 @@ def test_list_tasks_cli_shows_paper_and_revisit_tasks(capsys: pytest.CaptureFixt
                 assert line.split()[1:4] == ["paper", seq[-2:], c.name]
                 assert line.endswith(f"{source}  {scored}") or f"{source} " in line
                 assert line.endswith(scored)
-    assert "SAFL/KITTI08-Revisit-v0" in out and "SAFL/Synth00-Revisit-v4" in out
+    assert "SAFL/KITTI08-Revisit-v0" in out and "SAFL/Synth00-Revisit-v6" in out
     assert (
         cli_main(["list", "tasks", "--suite", "paper", "--source", "kitti", "--fingerprints"]) == 0
     )

@@ -25,6 +25,16 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   leaves out the passes in the other lane a few metres over: how many of those a route holds
   moves the near bins (on data version 3, 8 % of the synthetic pairs 2-4 m apart against 0.2 %
   on KITTI 00 and 3 % on 02), and this curve shows the images without that mix;
+- aliasing (`PairCurves.alias_share`): how alike distant places look, the share of the sampled
+  pairs more than `FAR_M` apart whose difference is below the median difference of the pairs
+  driving the same way `ALIAS_REF_M` (10-12 m) apart: a distant place that looks more like this
+  one than the same street a few metres on does;
+- route measures (`route_measures`, from poses and times alone): how much of a route revisits
+  (a place within 5 m, more than 30 s earlier, as `synth.routes.revisit_kinds`), the loops
+  that bring it back (the driving between a frame and the latest earlier pass of its place:
+  shortest and median, with the time gap), the share of frames on a short lap (a loop shorter
+  than `SHORT_LAP_M`, 500 m: KITTI 00, 02, 05 and 06 have none, their shortest loop is 556 m),
+  and the share passing a place a third time;
 - `goals`: the issue's targets (`EXCESS_GOAL`, the real non-zero range widened by `NONZERO_WIDEN`
   of each end's value, `TAU_GOAL`), each with its value and whether it is met;
 - `envelope_excess`: how far, at its worst bin, a synthetic curve lies outside the min-max
@@ -82,6 +92,14 @@ DESCRIPTORS = ("sad", "polar")
 TOPVIEW_METHODS = ("sad", "bigan@1", "stable_afl@1", "bevplace")
 #: Frames whose pairs farther than FAR_M give the normaliser (evenly spaced).
 FAR_SAMPLE = 500
+#: Distance band, metres, of the same-way pairs whose median difference `alias_share` compares
+#: the far pairs with.
+ALIAS_REF_M = (10.0, 12.0)
+#: A revisit after a loop shorter than this (metres of driving) is on a short lap.
+SHORT_LAP_M = 500.0
+#: Revisits: a place within this radius (metres) driven more than this long (s) before.
+ROUTE_RADIUS_M = 5.0
+ROUTE_GAP_S = 30.0
 #: Query frames compared at once when collecting the near pairs.
 _ROWS = 128
 
@@ -94,6 +112,8 @@ class SequenceImages:
     images: np.ndarray
     positions: np.ndarray
     headings: np.ndarray
+    #: timestamps (s) of the frames; with them `measure` adds the route measures
+    times: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.images = as_levels(self.images)
@@ -271,6 +291,8 @@ class PairCurves(NamedTuple):
     distance: Curve
     heading: Curve
     distance_same_way: Curve
+    #: share of far pairs below the median same-way difference at `ALIAS_REF_M` (module doc)
+    alias_share: float | None = None
 
 
 def pair_curves(desc: np.ndarray, descriptor: str, positions: np.ndarray, headings: np.ndarray,
@@ -332,7 +354,13 @@ def pair_curves(desc: np.ndarray, descriptor: str, positions: np.ndarray, headin
             values.append(float(np.median(vals)) / norm if vals.size and norm else None)
         return Curve([float(e) for e in edges], values, counts, norm)
 
-    return PairCurves(curve(d_edges, near), curve(h_edges, turn), curve(d_edges, near_same_way))
+    ref = [np.concatenate(near_same_way[b]) for b in range(len(d_edges) - 1)
+           if near_same_way[b] and d_edges[b] >= ALIAS_REF_M[0] and d_edges[b + 1] <= ALIAS_REF_M[1]]
+    ref_vals = np.concatenate(ref) if ref else np.zeros(0)
+    alias = (float(np.mean(far_vals < np.median(ref_vals))) if ref_vals.size and far_vals.size
+             else None)
+    return PairCurves(curve(d_edges, near), curve(h_edges, turn), curve(d_edges, near_same_way),
+                      alias)
 
 
 def envelope_excess(synthetic: Curve, real: Sequence[Curve]) -> tuple[float, int | None]:
@@ -351,6 +379,52 @@ def envelope_excess(synthetic: Curve, real: Sequence[Curve]) -> tuple[float, int
     return worst, where
 
 
+# -- routes -----------------------------------------------------------------------------------
+@dataclass
+class RouteMeasures:
+    """How a route comes back to its places (module doc); loop and gap fields are None on a
+    route without revisits."""
+
+    frames: int
+    length_m: float
+    revisit_share: float
+    short_lap_share: float
+    third_pass_share: float
+    loop_min_m: float | None
+    loop_median_m: float | None
+    gap_median_s: float | None
+
+
+def route_measures(positions: np.ndarray, times: np.ndarray) -> RouteMeasures:
+    """The route measures of one sequence from its positions (n, 2) and times (n,)."""
+    from safl_bench.common.loops import loop_pairs
+
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    if len(t) != len(pos) or len(pos) < 2:
+        raise DataError(f"route measures need as many times as positions (at least 2), got "
+                        f"{len(t)} and {len(pos)}")
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pos, axis=0), axis=1))])
+    pairs = loop_pairs(pos, t, ROUTE_RADIUS_M, ROUTE_GAP_S)
+    n = len(pos)
+    if not len(pairs):
+        return RouteMeasures(n, float(s[-1]), 0.0, 0.0, 0.0, None, None, None)
+    queries, first = np.unique(pairs[:, 0], return_index=True)
+    ends = np.append(first[1:], len(pairs))
+    latest = np.array([pairs[a:b, 1].max() for a, b in zip(first, ends, strict=True)])
+    # earlier passes: runs of matches more than ROUTE_GAP_S apart in time
+    passes = np.array([1 + int(np.sum(np.diff(np.sort(t[pairs[a:b, 1]])) > ROUTE_GAP_S))
+                       for a, b in zip(first, ends, strict=True)])
+    loops = s[queries] - s[latest]
+    return RouteMeasures(
+        frames=n, length_m=float(s[-1]), revisit_share=len(queries) / n,
+        short_lap_share=float(np.sum(loops < SHORT_LAP_M)) / n,
+        third_pass_share=float(np.sum(passes >= 2)) / n,
+        loop_min_m=float(loops.min()), loop_median_m=float(np.median(loops)),
+        gap_median_s=float(np.median(t[queries] - t[latest])),
+    )
+
+
 # -- one sequence, all statistics -------------------------------------------------------------
 @dataclass
 class SequenceFidelity:
@@ -362,17 +436,23 @@ class SequenceFidelity:
     distance: dict[str, Curve] = field(default_factory=dict)  # per descriptor
     heading: dict[str, Curve] = field(default_factory=dict)
     distance_same_way: dict[str, Curve] = field(default_factory=dict)
+    alias_share: dict[str, float | None] = field(default_factory=dict)
+    route: RouteMeasures | None = None
 
 
 def measure(seq: SequenceImages, resolution_m: float = 0.4,
             descriptors: Sequence[str] = DESCRIPTORS) -> SequenceFidelity:
-    """Image statistics and both curves of every descriptor for one sequence."""
+    """Image statistics, the curves and aliasing of every descriptor, and (with times) the route
+    measures of one sequence."""
     out = SequenceFidelity(seq.label, len(seq.images), image_stats(seq.images, resolution_m))
+    if seq.times is not None:
+        out.route = route_measures(seq.positions, seq.times)
     for name in descriptors:
         desc = describe(seq.images, name, resolution_m)
         curves = pair_curves(desc, name, seq.positions, seq.headings)
         out.distance[name], out.heading[name] = curves.distance, curves.heading
         out.distance_same_way[name] = curves.distance_same_way
+        out.alias_share[name] = curves.alias_share
     return out
 
 

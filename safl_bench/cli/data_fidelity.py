@@ -40,6 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--synth-sequence", metavar="XX", default="00",
                         help="synthetic sequence (default 00, the default's test sequence)")
     parser.add_argument("--seed", type=seed, default=0, help="synthetic seed (default 0)")
+    parser.add_argument("--data-version", metavar="V", default=None,
+                        help="synthetic data version (default: the newest this safl-bench generates)")
     parser.add_argument("--synth-root", metavar="DIR", default=None,
                         help="a KITTI-layout root to take as the synthetic side instead of the default "
                              "(e.g. a changed generator's output); place recognition is then skipped")
@@ -87,6 +89,59 @@ def _table(rows: list[list[str]]) -> str:
              for r in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+#: Data seeds whose synthetic routes the report measures (poses only, no rendering).
+ROUTE_SEEDS = range(5)
+
+
+def _synth_task(current: str, version: str | None) -> str:
+    """The revisit task of the synthetic sequence on data `version`: `current` (the newest
+    data), else the highest registered version of that name on `version`."""
+    from safl_bench.tasks.registry import registry
+    from safl_bench.tasks.spec import make_id
+
+    spec_ = registry[current]
+    if version is None or spec_.data_version == version:
+        return current
+    versions = [s.version for s in registry.values() if s.namespace == spec_.namespace
+                and s.name == spec_.name and s.data_version == version]
+    return make_id(spec_.namespace, spec_.name, max(versions)) if versions else current
+
+
+def _synth_routes(args: argparse.Namespace) -> dict[int, Any]:
+    """Route measures of the synthetic sequence for each of `ROUTE_SEEDS` (cheap: no town)."""
+    from safl_bench import synth
+    from safl_bench.analysis.fidelity import route_measures
+
+    version = args.data_version or synth.GENERATOR_VERSION
+    out = {}
+    for k in ROUTE_SEEDS:
+        scene = synth.make_route(args.synth_sequence, k, version=version)
+        out[k] = route_measures(scene.trajectory.xy, scene.trajectory.times)
+    return out
+
+
+def _route_text(r: Any) -> str:
+    loops = "no loops" if r.loop_min_m is None else f"{r.loop_min_m:.0f} / {r.loop_median_m:.0f} m"
+    return f"{100 * r.revisit_share:.1f} %, {100 * r.short_lap_share:.1f} %, {loops}"
+
+
+def _route_rows(order: list[Any]) -> list[list[str]]:
+    """Rows of the route measures of the measured sequences (n/a where they had no times)."""
+    def cell(m: Any, key: str, pct: bool = False) -> str:
+        value = None if m.route is None else getattr(m.route, key)
+        if value is None:
+            return "n/a"
+        return _fmt(value, pct=True) if pct else f"{value:.0f}"
+
+    return [["route length m", *[cell(m, "length_m") for m in order]],
+            ["frames revisiting (5 m, > 30 s)", *[cell(m, "revisit_share", True) for m in order]],
+            ["frames on a short lap (loop < 500 m)", *[cell(m, "short_lap_share", True) for m in order]],
+            ["frames on a third pass", *[cell(m, "third_pass_share", True) for m in order]],
+            ["shortest loop m", *[cell(m, "loop_min_m") for m in order]],
+            ["median loop m", *[cell(m, "loop_median_m") for m in order]],
+            ["median revisit gap s", *[cell(m, "gap_median_s") for m in order]]]
 
 
 def _xy(edges: list[float], values: list[float | None]) -> tuple[np.ndarray, list[float]]:
@@ -226,13 +281,15 @@ def main(args: argparse.Namespace) -> int:
 
         synth: Any = kitti_source(args.synth_root)
     else:
-        synth = synth_source(args.seed, [args.synth_sequence], progress=progress)
+        synth = synth_source(args.seed, [args.synth_sequence], progress=progress,
+                             version=args.data_version)
     sseq = synth.sequence(args.synth_sequence)
     frames = select_frames(len(sseq), args.step)
     views = mapcache.load_views(synth, args.synth_sequence, config, frames=frames, condition=CLEAN,
                                 seed=0, progress=progress)
     synth_label = f"synthetic {args.synth_sequence}" if args.synth_root is None else f"{args.synth_root} {args.synth_sequence}"
-    data = [F.SequenceImages(synth_label, np.asarray(views), sseq.positions[frames], sseq.headings[frames])]
+    data = [F.SequenceImages(synth_label, np.asarray(views), sseq.positions[frames], sseq.headings[frames],
+                             sseq.times[frames])]
     for name in args.sequences:
         seq = real.sequence(str(name))
         images = real.images(str(name), progress=progress)
@@ -240,7 +297,7 @@ def main(args: argparse.Namespace) -> int:
             raise DataError(f"{seq.folder / 'imgs'}: images are {images.shape[1]}x{images.shape[1]}, "
                             f"not BEVPlace's {config.size}x{config.size}")
         data.append(F.SequenceImages(f"real {name}", images[::args.step], seq.positions[::args.step],
-                                     seq.headings[::args.step]))
+                                     seq.headings[::args.step], seq.times[::args.step]))
     measured = [F.measure(d, config.cell_m) for d in data]
     del data, views
     synth_m, real_m = measured[0], measured[1:]
@@ -256,7 +313,8 @@ def main(args: argparse.Namespace) -> int:
     registered = {m.name for m in list_methods()}
     methods = [m for m in (args.methods or F.TOPVIEW_METHODS)
                if args.methods or m.partition("@")[0] in registered]
-    synth_task = revisit_id("synth", args.synth_sequence)
+    synth_task = _synth_task(revisit_id("synth", args.synth_sequence), getattr(synth, "version", None))
+    routes = _synth_routes(args) if args.synth_root is None else {}
     real_tasks = [revisit_id("bev", str(s)) for s in args.sequences]
     pr: dict[str, dict[str, F.MethodResult]] = {}
     taus: dict[str, float | None] = {"mean": None}
@@ -303,10 +361,17 @@ def main(args: argparse.Namespace) -> int:
             rows.append([f"{title} at same place, turned {h_edges[k]:g}-{h_edges[k + 1]:g} deg",
                          *[_fmt(m.heading[name].values[k]) + f" ({m.heading[name].counts[k]})" for m in order]])
         rows.append([f"{title} median difference beyond 100 m", *[_fmt(m.distance[name].far_median, digits=4) for m in order]])
+        rows.append([f"{title} far pairs alike (below {F.ALIAS_REF_M[0]:g}-{F.ALIAS_REF_M[1]:g} m same way)",
+                     *[_fmt(m.alias_share[name], pct=True) for m in order]])
+    rows += _route_rows(order)
     print(f"fidelity: {synth_m.label} (seed {args.seed}, BEV-density encoding) against BEVPlace's images of "
           f"{', '.join(labels[:-1])} under {root}; every {args.step if args.step > 1 else ''}"
           f"{'th ' if args.step > 1 else ''}frame")
     print(_table(rows))
+    if routes:
+        print(f"routes of the synthetic {args.synth_sequence}, data seeds {min(routes)}-{max(routes)} "
+              "(poses only; revisit %, short-lap %, shortest / median loop m):")
+        print("  " + "; ".join(f"seed {k}: {_route_text(r)}" for k, r in routes.items()))
     for name, title in (("sad", "SAD"), ("polar", "polar")):
         value, kb = excess[name]
         where = _worst(synth_m.distance[name].edges, kb, "m")
@@ -383,6 +448,9 @@ def main(args: argparse.Namespace) -> int:
             "mean_nonzero": {"real": {m.label.split()[-1]: m.stats.mean_nonzero for m in real_m},
                              "synthetic": synth_m.stats.mean_nonzero},
             "ranking_tau": taus.get("mean"),
+            "routes": {m.label: to_jsonable(m.route) for m in measured},
+            "synthetic_routes_by_seed": {str(k): to_jsonable(r) for k, r in routes.items()},
+            "alias_share": {m.label: m.alias_share for m in measured},
             "goals": {g.name: {"value": g.value, "target": g.target, "met": g.met} for g in targets},
             "ranking_comparisons": [c.to_json() for c in comps],
             "ranking_tau_per_sequence": {t: v for t, v in taus.items() if t != "mean"},
@@ -390,6 +458,7 @@ def main(args: argparse.Namespace) -> int:
             "pair_orders": {t: [_order_json(o) for o in per] for t, per in orders.items()},
             "sequences": {m.label: to_jsonable(m) for m in measured},
             "synthetic": {"seed": args.seed, "sequence": args.synth_sequence, "root": str(synth.root),
+                          "data_version": getattr(synth, "version", None), "task": synth_task,
                           "map_config": to_jsonable(config)},
             "real_root": str(root),
             "step": args.step,

@@ -46,6 +46,8 @@ class SourceSpec(Protocol):
     def sequence(self) -> str: ...
     @property
     def rotated(self) -> str | None: ...
+    @property
+    def data_version(self) -> str | None: ...
 
 #: The option that points each real source at its data (for error messages).
 ROOT_OPTION = {"kitti": "--kitti-root DIR", "bev": "--bev-root DIR"}
@@ -107,7 +109,8 @@ def open_source(spec: SourceSpec, *, kitti_root: str | None = None, bev_root: st
     from safl_bench import paths
 
     if spec.source == "synth":
-        return synth_source(seed=spec.data_seed, sequences=(spec.sequence,), progress=progress)
+        return synth_source(seed=spec.data_seed, sequences=(spec.sequence,), progress=progress,
+                            version=spec.data_version)
     rotated = getattr(spec, "rotated", None)
     if spec.source == "bev" and rotated == "both":
         return bev_source(_rot_root(spec, bev_rot_root), bev_resolution_m, ROTATED_LABELS[rotated])

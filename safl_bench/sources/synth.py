@@ -24,6 +24,8 @@ class SynthSource(KittiSource):
     """The synthetic default generated for world seed `seed` (KITTI layout)."""
 
     seed: int = 0
+    #: the synthetic data version (`synth.GENERATOR_VERSIONS`; None: the newest)
+    version: str | None = None
     kind: ClassVar[str] = "synth"
 
     def manifest_digest(self, name: str) -> str | None:
@@ -46,14 +48,20 @@ def synth_source(
     *,
     progress: bool = True,
     root: Path | None = None,
+    version: str | None = None,
 ) -> SynthSource:
-    """The embedded synthetic default for `seed`, generated first where missing or stale.
+    """The embedded synthetic default for `seed` in data `version` (None: the newest),
+    generated first where missing or stale.
 
     `sequences` defaults to the synthetic test sequences (`safl_bench.synth.TEST_SEQUENCES`).
     """
     from safl_bench import synth  # lazy: the generator is heavy and optional for KITTI users
 
+    version = synth.check_version(version if version is not None else synth.GENERATOR_VERSION)
     names = list(sequences) if sequences is not None else list(synth.TEST_SEQUENCES)
-    base = Path(root) if root is not None else synth.default_root(seed)
-    synth.ensure(base, names, seed=seed, progress=progress)
-    return SynthSource(root=base, label=f"synthetic default (seed {seed})", seed=seed)
+    base = Path(root) if root is not None else synth.default_root(seed, version)
+    synth.ensure(base, names, seed=seed, progress=progress, version=version)
+    label = f"synthetic default (seed {seed})"
+    if version != synth.GENERATOR_VERSION:
+        label = f"synthetic default (seed {seed}, data version {version})"
+    return SynthSource(root=base, label=label, seed=seed, version=version)

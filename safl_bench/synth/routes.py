@@ -122,12 +122,13 @@ class Trajectory:
 
 def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator,
                 rule: LoopRule | None = None,
-                lines: tuple[np.ndarray, np.ndarray] | None = None) -> list[tuple[int, int]] | None:
+                lines: tuple[np.ndarray, np.ndarray] | None = None) -> list[tuple[int, int]]:
     """A walk over an nu x nv grid of crossings with n_edges steps and no U-turns.
 
     With a `rule` (which needs the street `lines`, plan u and v of the crossings) a step may only
-    go where the rule allows; a walk left with nowhere to go is None. Without one the draws are
-    those of data versions up to 5."""
+    go where the rule allows, and a walk left with nowhere to go ends there (shorter than asked:
+    `plan_trajectory` draws another when it is too short for the sequence). Without one the draws
+    are those of data versions up to 5."""
     node = (int(rng.integers(0, nu)), int(rng.integers(0, nv)))
     walk = [node]
     heading = -1
@@ -146,7 +147,7 @@ def random_walk(nu: int, nv: int, n_edges: int, rng: np.random.Generator,
                 options.append((h, nxt))
                 weights.append(w)
         if not options and rule is not None:
-            return None
+            break
         if not options:  # a dead end only at a 1-wide grid: turn around
             h = (heading + 2) % 4
             options, weights = [(h, (node[0] + _DIRS[h][0], node[1] + _DIRS[h][1]))], [1.0]
@@ -311,10 +312,10 @@ def plan_trajectory(grid: StreetGrid, frames: int, rng: np.random.Generator, *,
     n_edges = int(np.ceil(needed / spacing)) + 1
     for _ in range(2000):
         walk = random_walk(nu, nv, n_edges, rng, rule, (grid.u_lines, grid.v_lines))
-        if walk is None or not accept(walk):
+        if not accept(walk):
             continue
         x, y, s, heading, pos, ends = _drive(grid, walk, frames, cruise, rate_hz, rng, wander_rng)
-        if pos[-1] > s[-1]:  # pragma: no cover - the walk length is an upper bound
+        if pos[-1] > s[-1]:  # a walk the loop rule ended early (otherwise the length is an upper bound)
             continue
         driven = walk[: int(np.searchsorted(s[ends], pos[-1])) + 1]
         if accept(driven):

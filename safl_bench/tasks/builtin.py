@@ -37,11 +37,14 @@ leave the first `CONTEXT_QUERIES` (the paper's d_s = 10) queries out of every me
 trajectory (issue #37). Their predecessors (synthetic paper v4, KITTI and top-view paper v0,
 BEVPlace v0) scored every query, the first ones on a shortened trajectory; they stay registered
 and runnable, in no suite, and `successor` names the version that replaced each. The revisit
-protocol is unchanged (v4 synthetic, v0 elsewhere): its first queries have no candidate older
-than the 30 s window (ten queries at every 4th frame span 3.6 s at 10 Hz), so none of them is
-ever answered. Synthetic tasks are on synthetic data version "5" (`SYNTH_DATA_VERSIONS`); their
-v0, v1, v2 and v3, on data versions "1", "2", "3" and "4", stay registered so that their records
-resolve, but they cannot be run (this safl-bench generates version "5" only).
+protocol kept every query (v0 off the synthetic source): its first queries have no candidate
+older than the 30 s window (ten queries at every 4th frame span 3.6 s at 10 Hz), so none of them
+is ever answered. The current synthetic tasks (paper and revisit v6) are on synthetic data
+version "6" (`SYNTH_DATA_VERSIONS`: routes under a loop rule, `synth.routes`); the paper v4 and
+v5 and revisit v4 tasks, on data version "5", stay registered and runnable (this safl-bench
+generates versions "5" and "6"), in no suite; the revisit protocol has no v5 (`SYNTH_SKIPPED`).
+Their v0-v3, on data versions "1"-"4", stay registered so that their records resolve, but they
+cannot be run.
 
 Never edit a registered definition: add a new version (e.g. `-v1`) beside it.
 """
@@ -104,8 +107,8 @@ _SUPERSEDED: list[str] = []
 
 #: The current version of the built-in tasks per protocol and source: the one the suites hold.
 TASK_VERSION = {
-    "paper": {"synth": 5, "kitti": 1, "bev": 1},
-    "revisit": {"synth": 4, "kitti": 0, "bev": 0},
+    "paper": {"synth": 6, "kitti": 1, "bev": 1},
+    "revisit": {"synth": 6, "kitti": 0, "bev": 0},
     "bevplace": {"bev": 1},
 }
 #: The first version per protocol and source whose leading queries are context only
@@ -113,7 +116,11 @@ TASK_VERSION = {
 CONTEXT_FROM = {"paper": {"synth": 5, "kitti": 1, "bev": 1}, "bevplace": {"bev": 1}}
 #: Task version of the synthetic tasks -> the synthetic data version it is defined on
 #: (`synth.GENERATOR_VERSION`); versions on another data version than the newest cannot be run.
-SYNTH_DATA_VERSIONS = {0: "1", 1: "2", 2: "3", 3: "4", 4: "5", 5: "5"}
+SYNTH_DATA_VERSIONS = {0: "1", 1: "2", 2: "3", 3: "4", 4: "5", 5: "5", 6: "6"}
+#: Versions a protocol skips on the synthetic source: the revisit protocol went from v4 to v6 with
+#: data version 6, so that v6 names the tasks on data version 6 in both protocols (its v5 would
+#: have been v4 again: the paper protocol's v5 changed only which queries are scored).
+SYNTH_SKIPPED = {"revisit": (5,)}
 
 
 def _version(source: str, version: int | None, protocol: str = "paper") -> int:
@@ -282,7 +289,7 @@ def register_builtin() -> None:
         if version < TASK_VERSION["paper"]["synth"]:
             old += [_paper("synth", sequence, condition, version) for sequence
                     in PAPER_SOURCE_SEQUENCES["synth"] for condition in (*PAPER_CONDITIONS, CLEAN)]
-        if version < TASK_VERSION["revisit"]["synth"]:
+        if version < TASK_VERSION["revisit"]["synth"] and version not in SYNTH_SKIPPED["revisit"]:
             old += [_revisit("synth", sequence, version) for sequence in REVISIT_SEQUENCES["synth"]]
     for source in ("kitti", "bev"):
         old += [_paper(source, sequence, condition, version)
@@ -298,9 +305,10 @@ def register_builtin() -> None:
 
 def superseded() -> list[str]:
     """Ids of the built-in tasks of older versions: registered, so that their records resolve,
-    but in no suite. The synthetic tasks on older synthetic data (v0-v3) cannot be run
-    (`registry.check_data_version`); the paper and BEVPlace tasks that scored every query
-    (synthetic paper v4, KITTI and top-view paper v0, BEVPlace v0) still can."""
+    but in no suite. The synthetic tasks on synthetic data the generator no longer makes (v0-v3)
+    cannot be run (`registry.check_data_version`); those on data version 5 (paper v4, v5,
+    revisit v4) and the paper and BEVPlace tasks that scored every query (KITTI and top-view paper
+    v0, BEVPlace v0) still can."""
     return list(_SUPERSEDED)
 
 

@@ -19,7 +19,13 @@ from dataclasses import replace
 from typing import Any
 
 from safl_bench.errors import ConfigError, RegistryError
-from safl_bench.tasks.spec import TaskSpec, current_synth_data_version, make_id, parse_id
+from safl_bench.tasks.spec import (
+    TaskSpec,
+    current_synth_data_version,
+    generated_synth_data_versions,
+    make_id,
+    parse_id,
+)
 
 #: All registered tasks by id (read it; change it through `register` / `unregister`).
 registry: dict[str, TaskSpec] = {}
@@ -103,22 +109,21 @@ def spec(task_id: str) -> TaskSpec:
 
 
 def check_data_version(spec_: TaskSpec) -> None:
-    """Raise ConfigError when `spec_` is a synthetic task defined on another version of the
-    synthetic data than the one this safl-bench generates: its data cannot be made any more, so
-    it may be looked up (its records resolve) but not materialised or run. The message names the
-    registered version of the task on the current data."""
-    if spec_.source != "synth":
+    """Raise ConfigError when `spec_` is a synthetic task defined on a version of the synthetic
+    data that this safl-bench no longer generates: its data cannot be made any more, so it may be
+    looked up (its records resolve) but not materialised or run. The message names the
+    registered version of the task on the newest data."""
+    if spec_.source != "synth" or spec_.data_version in generated_synth_data_versions():
         return
     current = current_synth_data_version()
-    if spec_.data_version == current:
-        return
     newer = [s.version for s in registry.values() if s.namespace == spec_.namespace
              and s.name == spec_.name and s.data_version == current]
     instead = (f"run {make_id(spec_.namespace, spec_.name, max(newer))}" if newer
                else f"register the task under a new version on data version {current}")
+    made = ", ".join(generated_synth_data_versions())
     raise ConfigError(
         f"{spec_.id} was defined on synthetic data version {spec_.data_version}; this safl-bench "
-        f"generates version {current}: {instead} (or, for the old data, a safl-bench that "
+        f"generates versions {made}: {instead} (or, for the old data, a safl-bench that "
         f"generates version {spec_.data_version})"
     )
 

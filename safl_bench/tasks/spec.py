@@ -58,10 +58,17 @@ def parse_id(task_id: str) -> tuple[str | None, str, int | None]:
 
 
 def current_synth_data_version() -> str:
-    """The version of the synthetic data this safl-bench generates (`synth.GENERATOR_VERSION`)."""
+    """The newest version of the synthetic data this safl-bench generates (`synth.GENERATOR_VERSION`)."""
     from safl_bench.synth.config import GENERATOR_VERSION  # lazy: the generator package is heavy
 
     return GENERATOR_VERSION
+
+
+def generated_synth_data_versions() -> tuple[str, ...]:
+    """Every version of the synthetic data this safl-bench generates (`synth.GENERATOR_VERSIONS`)."""
+    from safl_bench.synth.config import GENERATOR_VERSIONS  # lazy: the generator package is heavy
+
+    return GENERATOR_VERSIONS
 
 
 def make_id(namespace: str | None, name: str, version: int | None) -> str:
