@@ -42,7 +42,7 @@ compared as 8-bit images (the PNG values) of every frame (`step` 1), with:
   some side are skipped;
 - place recognition (`place_recognition`): Recall@1 and F1max of single-frame matching (the
   descriptor's own nearest neighbour) of every top-view method on the revisit protocol, real
-  (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v4`, the
+  (`SAFL/BEVKITTI<seq>-Revisit-v0`) against synthetic (`SAFL/Synth<seq>-Revisit-v6`, the
   method's usual input on the default, the runner's choice), read from result records or run;
   `ranking_tau` is Kendall's tau-b between the methods' orders on the synthetic task and on
   the real ones, counting as a tie every pair whose order is not resolved beyond the noise

@@ -3,7 +3,7 @@
 For each method: milliseconds per frame at batch 1 (the robot's case), throughput in batches,
 and for methods with their own distance the time of a KITTI-00-sized difference matrix
 (4541 x 4541 descriptors, drawn from the real ones with replacement). Views are those of a
-clean task (by default `SAFL/Synth00-T0R0-v5`, generated and cached on first use), so every
+clean task (by default `SAFL/Synth00-T0R0-v6`, generated and cached on first use), so every
 method is timed on the input it declares (top-view maps or local-map points), resampled to its
 `input_size` as the runner does. A method whose cost depends on the view size and that is
 published for one size (class attribute `bench_view_size`, e.g. BEVPlace's 151 x 151 images) is
@@ -40,7 +40,7 @@ from safl_bench.methods.method import (
 )
 from safl_bench.run import timing
 
-DEFAULT_TASK = "SAFL/Synth00-T0R0-v5"
+DEFAULT_TASK = "SAFL/Synth00-T0R0-v6"
 MATRIX_N = 4541
 BATCHED_BUDGET_S = 10.0
 

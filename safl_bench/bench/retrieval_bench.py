@@ -31,7 +31,7 @@ from safl_bench.methods.method import make_method
 from safl_bench.methods.retrieval import is_retrieval
 
 DEFAULT_METHOD = "map_closures"
-DEFAULT_TASK = "SAFL/Synth00-Revisit-v4"
+DEFAULT_TASK = "SAFL/Synth00-Revisit-v6"
 
 
 def run(method_name: str = DEFAULT_METHOD, task_id: str = DEFAULT_TASK, *,

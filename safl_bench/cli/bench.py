@@ -38,7 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job", "retrieval", "slam"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time, NAME or NAME@VERSION (repeatable; default: every registered "
                         "version; seeds: stable_afl@1, bigan@1)")
-    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v5; "
+    parser.add_argument("--task", default=None, help="task whose clean views are timed (default SAFL/Synth00-T0R0-v6; "
                         "seeds: the cell run, default SAFL/BEVKITTI00-T1R1-v1)")
     parser.add_argument("--frames", type=int, default=None,
                         help="frames per timed batch-1 run (default 50; bevplace: 8)")

@@ -75,6 +75,8 @@ DEPLOY_FROM: dict[str, str] = {
     "SAFL/BEVKITTI06-Revisit-v0": "SAFL/BEVKITTI05-Revisit-v0",
     "SAFL/Synth00-Revisit-v4": "SAFL/Synth09-Revisit-v4",
     "SAFL/Synth09-Revisit-v4": "SAFL/Synth00-Revisit-v4",
+    "SAFL/Synth00-Revisit-v6": "SAFL/Synth09-Revisit-v6",
+    "SAFL/Synth09-Revisit-v6": "SAFL/Synth00-Revisit-v6",
 }
 
 
