@@ -64,6 +64,23 @@ def test_write_is_atomic_and_leaves_no_temp_files(tmp_path: Path) -> None:
     assert not any((tmp_path / "bad").rglob("*.*")), "a refused record must leave no file behind"
 
 
+def test_records_get_the_permissions_of_an_ordinary_write(tmp_path: Path) -> None:
+    """0666 less the umask (a group or CI job can read a shared results folder), not the
+    temporary file's 0600."""
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        path = write_record(tmp_path, make_record())
+        assert stat.S_IMODE(path.stat().st_mode) == 0o644
+        os.umask(0o002)
+        write_record(tmp_path, make_record(recall=0.25))
+        assert stat.S_IMODE(path.stat().st_mode) == 0o664
+    finally:
+        os.umask(old)
+
+
 def test_curves_are_downsampled() -> None:
     x = np.linspace(0, 1, 5000)
     xs, ys = downsample_curve(x, x**2)

@@ -3,6 +3,10 @@
 Every file the harness produces that a later run reuses (map caches, result records,
 checkpoints) goes through these helpers, so an interrupted run never leaves a half-written file
 that looks valid.
+
+The new file gets the permissions an ordinary `open(path, "w")` would give it (0666 less the
+process's umask), not the 0600 of `tempfile.mkstemp`'s temporary file: a results folder shared
+with a group or a CI job stays readable to them.
 """
 
 from __future__ import annotations
@@ -14,6 +18,13 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
+
+
+def _umask() -> int:
+    """The process's umask (read by setting it, then putting it back)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @contextmanager
@@ -34,6 +45,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         yield tmp
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, target)
     finally:
         if tmp.exists():
