@@ -123,16 +123,17 @@ def test_synth_source_calls_ensure_and_keys_on_manifest(
 
     calls = []
 
-    def fake_ensure(root: Path, sequences: list[str], seed: int = 0, progress: bool = True) -> None:
-        calls.append((root, list(sequences), seed))
+    def fake_ensure(root: Path, sequences: list[str], seed: int = 0, progress: bool = True,
+                    version: str = "6") -> None:
+        calls.append((root, list(sequences), seed, version))
         for name in sequences:
             write_kitti(root, name, n=4)
             manifest_path(root, name).write_text(f'{{"seed": {seed}}}')
 
     monkeypatch.setattr(synth, "ensure", fake_ensure)
-    monkeypatch.setattr(synth, "default_root", lambda seed=0: tmp_path / f"seed-{seed}")
+    monkeypatch.setattr(synth, "default_root", lambda seed=0, version="6": tmp_path / f"v{version}-seed-{seed}")
     source = resolve_source(None, sequences=["09"], seed=3, progress=False)
-    assert calls == [(tmp_path / "seed-3", ["09"], 3)]
+    assert calls == [(tmp_path / "v6-seed-3", ["09"], 3, synth.GENERATOR_VERSION)]
     assert source.kind == "synth" and source.label == "synthetic default (seed 3)"
     assert len(source.sequence("09")) == 4
     before = source.fingerprint("09")
