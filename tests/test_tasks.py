@@ -82,6 +82,14 @@ def test_builtin_suites_cover_the_paper_and_revisit() -> None:
         tasks.suite("papr")
 
 
+def test_run_help_names_every_suite(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        cli_main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for name in tasks.SUITES:
+        assert name in text, name
+
+
 def test_builtin_tasks_are_registered_with_gymnasium_lazily() -> None:
     for task_id in tasks.suite("all"):
         env_spec = gymnasium.spec(task_id)

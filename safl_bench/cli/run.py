@@ -27,12 +27,14 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from safl_bench.tasks.builtin import SUITES
+
     parser.add_argument("--method", required=True, action="append",
                         help="registered method (safl-bench list methods); repeatable: the grid "
                              "method x task x seed runs as one queue")
     parser.add_argument(
         "--task", action="append", default=[], metavar="ID|SUITE",
-        help="task id or suite (paper, paper-full, revisit, sanity, all); repeatable; default: paper",
+        help=f"task id or suite ({', '.join(SUITES)}); repeatable; default: paper",
     )
     parser.add_argument("--kitti-root", metavar="DIR", help="KITTI odometry root: run the KITTI tasks")
     add_bev_arguments(parser)
