@@ -98,15 +98,12 @@ ROUTE_SEEDS = range(5)
 def _synth_task(current: str, version: str | None) -> str:
     """The revisit task of the synthetic sequence on data `version`: `current` (the newest
     data), else the highest registered version of that name on `version`."""
-    from safl_bench.tasks.registry import registry
-    from safl_bench.tasks.spec import make_id
+    from safl_bench.tasks.registry import latest_on_data, registry
 
     spec_ = registry[current]
     if version is None or spec_.data_version == version:
         return current
-    versions = [s.version for s in registry.values() if s.namespace == spec_.namespace
-                and s.name == spec_.name and s.data_version == version]
-    return make_id(spec_.namespace, spec_.name, max(versions)) if versions else current
+    return latest_on_data(spec_, version) or current
 
 
 def _synth_routes(args: argparse.Namespace) -> dict[int, Any]:

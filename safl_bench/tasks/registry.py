@@ -108,6 +108,14 @@ def spec(task_id: str) -> TaskSpec:
     raise RegistryError(f"task {task_id} has no version v{version}; registered versions: {listed}")
 
 
+def latest_on_data(spec_: TaskSpec, data_version: str) -> str | None:
+    """The id of the highest registered version of `spec_`'s task name defined on synthetic
+    `data_version`; None when there is none."""
+    versions = [s.version for s in registry.values() if s.namespace == spec_.namespace
+                and s.name == spec_.name and s.data_version == data_version]
+    return make_id(spec_.namespace, spec_.name, max(versions)) if versions else None
+
+
 def check_data_version(spec_: TaskSpec) -> None:
     """Raise ConfigError when `spec_` is a synthetic task defined on a version of the synthetic
     data that this safl-bench no longer generates: its data cannot be made any more, so it may be
@@ -116,9 +124,8 @@ def check_data_version(spec_: TaskSpec) -> None:
     if spec_.source != "synth" or spec_.data_version in generated_synth_data_versions():
         return
     current = current_synth_data_version()
-    newer = [s.version for s in registry.values() if s.namespace == spec_.namespace
-             and s.name == spec_.name and s.data_version == current]
-    instead = (f"run {make_id(spec_.namespace, spec_.name, max(newer))}" if newer
+    newest = latest_on_data(spec_, current)
+    instead = (f"run {newest}" if newest is not None
                else f"register the task under a new version on data version {current}")
     made = ", ".join(generated_synth_data_versions())
     raise ConfigError(
