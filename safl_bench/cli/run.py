@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -76,6 +77,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="named matcher settings, refined by --score and --matcher: paper (default: Table I, "
         "Eq. 5-7), authors (the authors' public code), openseqslam; safl-bench list matchers",
     )
+    parser.add_argument(
+        "--block-mb", metavar="MB", default=None,
+        help="memory budget of the difference matrix's query blocks: the matcher holds about this "
+        "much of it at a time, whatever the frames (default: $SAFL_BLOCK_MB or 1024); changes "
+        "no result (safl_bench.matching.blocks)")
     # --score refines the preset only when given (the paper preset's score is "min", as before)
     parser.set_defaults(score=None)
     add_parallel_arguments(parser, "build the views and evaluate the cells")
@@ -138,6 +144,10 @@ def main(args: argparse.Namespace) -> int:
     from safl_bench.run.runner import RunOptions, resolve_tasks, run_grid, summary_table
     from safl_bench.tasks import spec
 
+    if args.block_mb is not None:  # checked before any work; the workers read it from the env
+        from safl_bench.matching import blocks
+
+        os.environ[blocks.BLOCK_MB_ENV] = repr(blocks.block_mb(args.block_mb, "--block-mb"))
     names = list(dict.fromkeys(args.method))
     if len(names) > 1 and (args.weights or args.param):
         raise ConfigError("--weights and --param apply to one method: give them with a single --method")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import time
+import warnings
 import weakref
 from dataclasses import dataclass
 from typing import Any, cast
@@ -40,7 +41,8 @@ from safl_bench.evaluation.metrics import (
     outcomes,
     true_place_ranks,
 )
-from safl_bench.matching.matcher import MatcherConfig, MatchResult, match
+from safl_bench.matching import blocks
+from safl_bench.matching.matcher import MatcherConfig, MatchResult
 from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they were defined here)
     DISTANCES,
     EVALUATION_SETTINGS,
@@ -217,11 +219,14 @@ def evaluate_method(
     revisit: bool = False,
     memo: DatabaseMemo | None = None,
     context: int = 0,
+    block_mb: float | None = None,
 ) -> Evaluation:
     """Run `method` on one task's views and score both matching modes (`config.max_frames`
     limits both sides first; `context`, the task's `TaskSpec.context_queries`, and
     `config.trim_queries` leave queries out of the metrics, not out of the matches: see
-    `scored_queries`). `memo`: database descriptors to reuse (`describe_database`)."""
+    `scored_queries`). `memo`: database descriptors to reuse (`describe_database`).
+    `block_mb`: the memory budget of the difference matrix's query blocks
+    (`safl_bench.matching.blocks.block_mb`; no result depends on it)."""
     cfg = config or EvaluationConfig()
     if cfg.max_frames is not None:
         queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
@@ -230,31 +235,63 @@ def evaluate_method(
         return evaluate_retrieval(method, queries, database, truth, config=cfg, revisit=revisit,
                                   context=context)
     d_q, d_db, describe_s, n = describe_pair(method, queries, database, memo)
-    D = compare(method, d_q, d_db, cfg.distance)
     limit = truth.db_limit() if revisit else None
-    matches: dict[str, MatchResult] = {}
-    seconds: dict[str, float] = {}
     window: WindowChoice | None = None
-    for mode in MODES:
-        t0 = time.perf_counter()
-        matcher = cfg.matcher(mode)
-        if matcher.needs_window:  # part of the sequence matcher's time
-            window = choose_window(method, d_db, cfg.distance)
-        matches[mode] = match(D, matcher, db_limit=limit,
-                              enhance_window=window.window if matcher.needs_window and window
-                              else None)
-        seconds[mode] = time.perf_counter() - t0
-    scored = scored_queries(len(D), cfg.trim_queries, context)
-    part = subset_truth(truth, scored, slice(None)) if scored != slice(0, len(D)) else truth
-    ranks = true_place_ranks(D[scored], [part.true_matches(i) for i in range(part.n_queries)],
-                             db_limit=None if limit is None else limit[scored],
-                             dtype=cfg.single_frame.dtype)
+    t0 = time.perf_counter()
+    if cfg.sequence.needs_window:  # part of the sequence matcher's time
+        window = choose_window(method, d_db, cfg.distance)
+    window_s = time.perf_counter() - t0
+    nq, ndb = len(d_q), len(d_db)
+    scored = scored_queries(nq, cfg.trim_queries, context)
+    part = subset_truth(truth, scored, slice(None)) if scored != slice(0, nq) else truth
+    ranks = np.zeros(part.n_queries, np.int64)
+    start, stop = int(scored.start), int(scored.stop)
+
+    def rank_rows(a: int, rows: np.ndarray) -> None:
+        """The true places' single-frame ranks of the scored queries among rows [a, ...)."""
+        lo, hi = max(a, start), min(a + len(rows), stop)
+        if hi > lo:
+            ranks[lo - start:hi - start] = true_place_ranks(
+                rows[lo - a:hi - a], [part.true_matches(i - start) for i in range(lo, hi)],
+                db_limit=None if limit is None else limit[lo:hi], dtype=cfg.single_frame.dtype)
+
+    configs = [cfg.matcher(mode) for mode in MODES]
+    step = blocks.block_rows(nq, ndb, block_mb)
+    if step >= nq or getattr(method, "rowwise_distance", True):
+        def rows(a: int, b: int) -> np.ndarray:
+            return compare(method, d_q[a:b], d_db, cfg.distance)
+    else:
+        _say_dense(method, nq, ndb)
+        D = compare(method, d_q, d_db, cfg.distance)
+        step = nq
+
+        def rows(a: int, b: int) -> np.ndarray:
+            return D[a:b]
+    results, seconds = blocks.match_rows(
+        rows, nq, ndb, configs, db_limit=limit, block=step, visit=rank_rows,
+        windows=[window.window if c.needs_window and window else None for c in configs])
+    matches = dict(zip(MODES, results, strict=True))
     per_query = {mode: match_outcomes(part, subset_result(matches[mode], scored),
                                       ranks if mode == "single_frame" else None)
                  for mode in MODES}
     metrics = {mode: evaluate_outcomes(per_query[mode], recall_at=RECALL_AT) for mode in MODES}
-    return Evaluation(matches, per_query, metrics, describe_s, n, seconds["sequence"],
+    return Evaluation(matches, per_query, metrics, describe_s, n, window_s + seconds[0],
                       window=window)
+
+
+def _say_dense(method: Method, nq: int, ndb: int) -> None:
+    """One line, once per method class and process: its distance is not row-wise, so the whole
+    difference matrix is built (`Method.rowwise_distance`)."""
+    kind = type(method)
+    if kind in _SAID_DENSE:
+        return
+    _SAID_DENSE.add(kind)
+    warnings.warn(f"method {method.name!r}: its distance is not row-wise (rowwise_distance = "
+                  f"False), so the whole {nq} x {ndb} difference matrix is built at once",
+                  stacklevel=3)
+
+
+_SAID_DENSE: set[type] = set()
 
 
 def evaluate_retrieval(

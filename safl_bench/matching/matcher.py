@@ -375,24 +375,30 @@ def _cand_range(offs, vi, k0, k1, ndb, jend, clip):
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out):
-    nq, ndb = Dh.shape
+def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out,
+                   q0, nqb, r0, nq):
+    """Queries q0 .. q0 + nqb - 1 of a query sequence of `nq` (outputs indexed from q0); row
+    ``r`` of the enhanced matrix is ``Dh[r - r0]`` (the dense path: q0 = r0 = 0, nqb = nq;
+    `safl_bench.matching.blocks` passes a block of rows). Every output of query T depends on
+    its own rows only, so a block gives bit for bit what the whole matrix gives."""
+    ndb = Dh.shape[1]
     nv, L = offs.shape
-    index = np.full(nq, -1, dtype=np.int64)
-    best_s = np.full(nq, np.inf)
-    second = np.full(nq, np.inf)
-    vel = np.full(nq, -1, dtype=np.int64)
-    n_terms = np.zeros(nq, dtype=np.int64)
-    for T in numba.prange(nq):
+    index = np.full(nqb, -1, dtype=np.int64)
+    best_s = np.full(nqb, np.inf)
+    second = np.full(nqb, np.inf)
+    vel = np.full(nqb, -1, dtype=np.int64)
+    n_terms = np.zeros(nqb, dtype=np.int64)
+    for t in numba.prange(nqb):
+        T = q0 + t
         k0 = max(0, -T - u_lo)
         k1 = min(L, nq - T - u_lo)
         cnt = k1 - k0
-        n_terms[T] = cnt
+        n_terms[t] = cnt
         jend = db_limit[T]
         best = np.full(ndb, np.inf, dtype=Dh.dtype)
         if (skip_edges and cnt < L) or jend <= 0:
             if keep:
-                S_out[T, :] = best
+                S_out[t, :] = best
             continue
         acc = np.zeros(ndb, dtype=Dh.dtype)
         for vi in range(nv):
@@ -402,7 +408,7 @@ def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out
             acc[alo:ahi] = 0.0
             for k in range(k0, k1):
                 o = offs[vi, k]
-                r = T + u_lo + k
+                r = T + u_lo + k - r0
                 lo = max(alo, -o)
                 hi = min(ahi, ndb - o)
                 if hi > lo:
@@ -427,8 +433,8 @@ def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out
                 bval = best[j]
                 jstar = j
         if jstar >= 0:
-            index[T] = jstar
-            best_s[T] = bval / cnt
+            index[t] = jstar
+            best_s[t] = bval / cnt
             # the velocity: first one whose sum at jstar equals the minimum (same additions
             # in the same order as above, so the comparison is exact)
             tot = np.full(nv, np.inf, dtype=Dh.dtype)
@@ -439,16 +445,16 @@ def _search_kernel(Dh, offs, u_lo, skip_edges, clip, db_limit, half, keep, S_out
                 tot[vi] = 0.0
                 for k in range(k0, k1):
                     c = min(max(jstar + offs[vi, k], 0), ndb - 1)
-                    tot[vi] += Dh[T + u_lo + k, c]
-            vel[T] = np.argmin(np.abs(tot - bval))  # first exact match (difference 0)
+                    tot[vi] += Dh[T + u_lo + k - r0, c]
+            vel[t] = np.argmin(np.abs(tot - bval))  # first exact match (difference 0)
             sv = np.inf
             for j in range(jend):
                 if abs(j - jstar) > half and best[j] < sv:
                     sv = best[j]
-            second[T] = sv / cnt
+            second[t] = sv / cnt
         if keep:
             for j in range(ndb):
-                S_out[T, j] = best[j] / cnt
+                S_out[t, j] = best[j] / cnt
     return index, best_s, second, vel, n_terms
 
 
@@ -558,49 +564,72 @@ def match(
     ft = _DTYPES[cfg.dtype]
     arr = _as_difference(D, ft)
     nq, ndb = arr.shape
-    if db_limit is None:
-        limit = np.full(nq, ndb, dtype=np.int64)
-    else:
-        limit = np.asarray(db_limit)
-        if limit.shape != (nq,) or not np.issubdtype(limit.dtype, np.integer):
-            raise DataError(f"db_limit must be an integer array of shape ({nq},), got "
-                            f"{limit.dtype} {limit.shape}")
-        if limit.size and (limit.min() < 0 or limit.max() > ndb):
-            raise DataError(f"db_limit values must lie in [0, {ndb}]")
-        limit = limit.astype(np.int64)
-
+    limit = db_limits(db_limit, nq, ndb)
     dh, shift = _enhanced(arr, cfg, D, window)
+    S_out = np.empty((nq, ndb) if keep_S else (0, 0), dtype=ft)
+    found = search(dh, cfg, limit, 0, nq, 0, nq, keep_S=keep_S, S_out=S_out)
+    S = None
+    if keep_S:
+        S_out -= ft(shift)
+        S = S_out
+    return finish(cfg, found, shift, ndb, window, S)
 
+
+def db_limits(db_limit: np.ndarray | None, nq: int, ndb: int) -> np.ndarray:
+    """`match`'s ``db_limit`` checked: (nq,) int64 in [0, ndb]; all of the database when None."""
+    if db_limit is None:
+        return np.full(nq, ndb, dtype=np.int64)
+    limit = np.asarray(db_limit)
+    if limit.shape != (nq,) or not np.issubdtype(limit.dtype, np.integer):
+        raise DataError(f"db_limit must be an integer array of shape ({nq},), got "
+                        f"{limit.dtype} {limit.shape}")
+    if limit.size and (limit.min() < 0 or limit.max() > ndb):
+        raise DataError(f"db_limit values must lie in [0, {ndb}]")
+    return limit.astype(np.int64)
+
+
+#: What the search kernel gives per query: (index, mean S of the best trajectory before the
+#: shift, the same outside the ratio window, the velocity's index, trajectory points).
+Found = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def search(dh: np.ndarray, cfg: MatcherConfig, limit: np.ndarray, q0: int, nqb: int, r0: int,
+           nq: int, *, keep_S: bool = False, S_out: np.ndarray | None = None) -> Found:
+    """The sequence search (module doc, 2-7) of queries q0 .. q0 + nqb - 1 of `nq` on the
+    enhanced rows `dh` (row r of the whole matrix is ``dh[r - r0]``), before the shift."""
     offs = cfg.offsets()
     u_lo, _ = cfg.u_range()
-    S_out = np.empty((nq, ndb) if keep_S else (0, 0), dtype=ft)
-    index, best, second, vel_i, n_terms = _search_kernel(
+    out = S_out if S_out is not None else np.empty((0, 0), dtype=dh.dtype)
+    return _search_kernel(
         dh, offs, u_lo, cfg.edge_queries == "skip", cfg.out_of_range == "clip", limit,
-        cfg.ratio_window // 2, keep_S, S_out)
+        cfg.ratio_window // 2, keep_S, out, q0, nqb, r0, nq)
 
+
+def finish(cfg: MatcherConfig, found: Found, shift: float, ndb: int, window: int,
+           S: np.ndarray | None = None) -> MatchResult:
+    """The `MatchResult` of the search's output for all queries and the matrix's shift (module
+    doc, 1 and 6)."""
+    index, best, second, vel_i, n_terms = found
+    nq = len(index)
     best_s = best - shift  # +inf stays +inf
     second_s = second - shift
-    found = index >= 0
+    found_q = index >= 0
     if cfg.score == "min":
         score = best_s.copy()
     elif cfg.score == "ratio":
         score = np.full(nq, np.inf)
-        ok = found & np.isfinite(second_s) & (second_s > 0)
-        score[found] = 1.0
+        ok = found_q & np.isfinite(second_s) & (second_s > 0)
+        score[found_q] = 1.0
         score[ok] = best_s[ok] / second_s[ok]
     else:
-        score, capped = _inverse_score(best_s, n_terms, found)
+        score, capped = _inverse_score(best_s, n_terms, found_q)
         if cfg.capped_match is not None and capped.any():
             if cfg.capped_match >= ndb:
                 raise ConfigError(f"capped_match={cfg.capped_match} is not a database frame "
                                   f"(the database has {ndb})")
             index[capped] = cfg.capped_match
     velocity = np.full(nq, np.nan)
-    velocity[found] = cfg.velocities()[vel_i[found]]
-    S = None
-    if keep_S:
-        S_out -= ft(shift)
-        S = S_out
+    velocity[found_q] = cfg.velocities()[vel_i[found_q]]
     return MatchResult(
         index=index, score=score, best_s=best_s, velocity=velocity, n_terms=n_terms,
         complete=n_terms == cfg.ds + 1, config=cfg, S=S, enhance_window=window)

@@ -41,6 +41,7 @@ CHECKS: tuple[str, ...] = (
     "distance-finite",
     "distance-nonnegative",
     "self-distance-minimal",
+    "distance-rowwise",
 )
 
 RETRIEVAL_CHECKS: tuple[str, ...] = (
@@ -206,6 +207,17 @@ def check_method(
     if (own > dist.min(axis=1) + 1e-5 * dscale).any():
         _fail("self-distance-minimal", f"{label}: a view is not closest to itself (distance to itself "
               f"{own.max():g} exceeds the row minimum)")
+    if getattr(method, "rowwise_distance", True) and len(q) > 1:
+        parts = np.concatenate([np.asarray(method.distance(q[i:i + 1], db)) for i in range(len(q))])
+        # within rounding: a BLAS product may round a row differently for another number of
+        # rows; the matcher's blocks are whole multiples of the distance's chunk (matching.blocks)
+        off = float(np.abs(parts.astype(np.float64) - dist).max()) if parts.shape == dist.shape \
+            else np.inf
+        if off > 1e-5 * dscale:
+            _fail("distance-rowwise", f"{label}: the distance of one query at a time differs from "
+                  f"that of all queries at once (by {off:g}), so the matcher's query blocks would "
+                  f"change matches; make each row depend on its query only, or set "
+                  f"rowwise_distance = False")
     return method
 
 

@@ -158,6 +158,12 @@ class Method:
     #: The top-view encoding the method reads on sources with scans (`MapConfig.encoding`, e.g.
     #: "bev-density" for BEVPlace, whose network learned that image); None: the task's own maps.
     view_encoding: ClassVar[str | None] = None
+    #: True when each row of ``distance(queries, database)`` depends on that query and the
+    #: database only, so the matcher may compute the difference matrix a block of queries at a
+    #: time (`safl_bench.matching.blocks`; `check_method` tests it). Set False for a distance
+    #: that looks at all queries at once (one normalised over the queries, say): the matcher
+    #: then builds the whole matrix, and says so.
+    rowwise_distance: ClassVar[bool] = True
 
     @property
     def input_size(self) -> int | None:

@@ -1,0 +1,188 @@
+"""Exact matching in bounded memory: the shared matcher on the difference matrix one block of
+query rows at a time, never holding the whole (Nq, Ndb) matrix.
+
+Why it is exact. Every step of the matcher (`safl_bench.matching.matcher`, module doc) reads
+one query row at a time, or a few neighbouring ones:
+
+1. Contrast enhancement (Eq. 5) runs along the database axis of ONE row: row i of the enhanced
+   matrix is a function of row i of D alone, computed by the same kernel on the same values.
+2. The sequence search of query T reads the enhanced rows its trajectories visit, T + u for
+   u = u_lo .. u_hi (`MatcherConfig.u_range`), and `db_limit[T]`; nothing else. A block of
+   queries is searched with those rows in memory: the block's own rows, the ``-u_lo`` rows
+   before it (kept from the previous block, not recomputed) and the ``u_hi`` rows after it (the
+   last queries of a block wait for the next block when the trajectory looks ahead).
+3. The shift (``shift=True``) is the minimum of the whole enhanced matrix: the minimum of the
+   blocks' minima, the same number. It is applied after the last block, as the dense path
+   applies it after the search.
+
+So a query's match, score and velocity are the same floating-point numbers as on the whole
+matrix (the dense path, `matcher.match`, is the single-block case of the same code: the search
+kernel takes the block's position), provided the rows themselves are: the difference of a
+block of queries must equal those rows of the whole difference. That holds for a distance that
+treats each query on its own (`Method.rowwise_distance`), computed with the same arithmetic:
+`safl_bench.methods.distance.sqeuclidean` works in query chunks of 1024 rows, so blocks are
+whole multiples of 1024 rows (`block_rows`), and every chunk is the same BLAS call on the same
+numbers as in one call over all queries. A method whose distance is not row-wise gets the
+whole matrix (`safl_bench.evaluation.cell` says so in one line).
+
+Memory. Per block: the block's difference rows, each matcher setting's enhanced rows plus the
+trajectory's rows before and after the block, in the matcher's dtype. `block_rows` sizes the
+block so that this stays under a budget (`DEFAULT_BLOCK_MB`, or ``SAFL_BLOCK_MB``, or the
+``--block-mb`` option of ``safl-bench run``): peak memory grows with Ndb (one row), not with
+Nq x Ndb. The budget changes no result: it is not a matcher setting and records do not carry it.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from safl_bench.errors import ConfigError, DataError
+from safl_bench.matching.matcher import (
+    _DTYPES,
+    MatcherConfig,
+    MatchResult,
+    _as_difference,
+    _enhance_kernel,
+    db_limits,
+    finish,
+    search,
+    window_of,
+)
+
+#: The memory budget (MB) of one block's rows when none is given and ``SAFL_BLOCK_MB`` is unset.
+DEFAULT_BLOCK_MB = 1024
+#: The environment variable that sets the budget for every run of this process and its workers.
+BLOCK_MB_ENV = "SAFL_BLOCK_MB"
+#: Blocks are whole multiples of this many rows (the query chunk of `methods.distance`), when
+#: the budget allows one: then a block's distances are the same BLAS calls as the whole matrix's.
+ALIGN_ROWS = 1024
+
+
+def block_mb(value: float | str | None = None, what: str = "block size") -> float:
+    """The budget in MB: `value` (`what` names it in errors), else ``SAFL_BLOCK_MB``, else
+    `DEFAULT_BLOCK_MB`; a ConfigError naming the value when it is not a number > 0."""
+    source = what
+    if value is None:
+        value = os.environ.get(BLOCK_MB_ENV)
+        source = BLOCK_MB_ENV
+        if value is None or value == "":
+            return float(DEFAULT_BLOCK_MB)
+    try:
+        mb = float(value)
+    except (TypeError, ValueError):
+        mb = float("nan")
+    if not np.isfinite(mb) or mb <= 0:
+        raise ConfigError(f"{source} must be a number of MB > 0, got {value!r}")
+    return mb
+
+
+def block_rows(n_queries: int, n_database: int, budget_mb: float | None = None, *,
+               itemsize: int = 4, copies: int = 3) -> int:
+    """Query rows per block: as many as fit `copies` arrays of (rows, Ndb) items in the budget
+    (the difference rows, and an enhanced copy with its trajectory rows for each of the two
+    matching modes), rounded down to a multiple of `ALIGN_ROWS` when at least that many fit,
+    at least 1, at most all queries."""
+    mb = block_mb(budget_mb)
+    per_row = max(n_database, 1) * itemsize * copies
+    rows = int(mb * 1e6 // per_row)
+    if rows >= ALIGN_ROWS:
+        rows -= rows % ALIGN_ROWS
+    return int(min(max(rows, 1), max(n_queries, 1)))
+
+
+@dataclass
+class _Stream:
+    """One matcher setting's state across blocks: its enhanced rows [lo, lo + len(rows)), the
+    next query to search, the running minimum, the outputs, the seconds spent."""
+
+    cfg: MatcherConfig
+    window: int
+    rows: np.ndarray
+    lo: int = 0
+    next_query: int = 0
+    minimum: float = np.inf
+    seconds: float = 0.0
+
+
+def match_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_database: int,
+               configs: Sequence[MatcherConfig], *, db_limit: np.ndarray | None = None,
+               windows: Sequence[int | None] | None = None, block: int | None = None,
+               visit: Callable[[int, np.ndarray], None] | None = None,
+               ) -> tuple[list[MatchResult], list[float]]:
+    """Match every setting of `configs` on the difference matrix whose rows ``[a, b)``
+    ``rows(a, b)`` returns, one block of `block` rows at a time (module doc; `block_rows` when
+    None). `windows`: each setting's ``enhance_window`` argument (`matcher.window_of`).
+    `visit(a, D_rows)` sees every block of raw rows once (for measures read from them, as the
+    true places' ranks). Returns the results (bit for bit `matcher.match`'s on the whole matrix)
+    and, per setting, the seconds spent enhancing and searching (not computing the rows)."""
+    nq, ndb = int(n_queries), int(n_database)
+    if nq < 1 or ndb < 1:
+        raise DataError(f"difference matrix is empty (shape ({nq}, {ndb}))")
+    step = block_rows(nq, ndb) if block is None else block
+    if not isinstance(step, int | np.integer) or isinstance(step, bool) or step < 1:
+        raise ConfigError(f"block size must be a whole number of query rows >= 1, got {block!r}")
+    limit = db_limits(db_limit, nq, ndb)
+    given = list(windows) if windows is not None else [None] * len(configs)
+    if len(given) != len(configs):
+        raise ConfigError(f"{len(configs)} matcher settings but {len(given)} windows")
+    streams = [_Stream(c, window_of(c, w), np.empty((0, ndb), _DTYPES[c.dtype]))
+               for c, w in zip(configs, given, strict=True)]
+    found = [[np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int64),
+              np.empty(0, np.int64)] for _ in streams]
+    parts: list[list[tuple[np.ndarray, ...]]] = [[] for _ in streams]
+    for a in range(0, nq, int(step)):
+        b = min(a + int(step), nq)
+        raw = np.asarray(rows(a, b))
+        if raw.shape != (b - a, ndb):
+            raise DataError(f"rows {a}..{b - 1} of the difference matrix have shape {raw.shape}, "
+                            f"expected ({b - a}, {ndb})")
+        if visit is not None:
+            visit(a, raw)
+        for s, out in zip(streams, parts, strict=True):
+            t0 = time.perf_counter()
+            try:
+                arr = _as_difference(raw, _DTYPES[s.cfg.dtype])
+            except DataError as exc:
+                raise DataError(f"rows {a}..{b - 1}: {exc}") from None
+            out.append(_advance(s, arr, a, b, nq, limit))
+            s.seconds += time.perf_counter() - t0
+    results = []
+    for s, out, empty in zip(streams, parts, found, strict=True):
+        cols = [np.concatenate([p[k] for p in out]) if out else empty[k] for k in range(5)]
+        shift = float(s.minimum) if s.cfg.shift else 0.0
+        results.append(finish(s.cfg, (cols[0], cols[1], cols[2], cols[3], cols[4]), shift, ndb,
+                              s.window))
+    return results, [s.seconds for s in streams]
+
+
+def _advance(s: _Stream, arr: np.ndarray, a: int, b: int, nq: int,
+             limit: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Add rows [a, b) to `s`, search every query whose rows are now all there, drop the rows
+    no later query reads; the search's outputs for those queries."""
+    u_lo, u_hi = s.cfg.u_range()
+    keep = s.rows
+    held = np.empty((len(keep) + (b - a), arr.shape[1]), dtype=arr.dtype)
+    held[:len(keep)] = keep
+    w = s.window
+    if w > 0:
+        before, after = (w // 2, w // 2) if s.cfg.enhance_mode == "centred" else (w, 0)
+        _enhance_kernel(arr, held[len(keep):], before, after)
+    else:
+        held[len(keep):] = arr
+    if s.cfg.shift:
+        s.minimum = min(s.minimum, float(held[len(keep):].min()))
+    end = nq if b == nq else max(s.next_query, b - u_hi)
+    q0, nqb = s.next_query, end - s.next_query
+    result = search(held, s.cfg, limit, q0, nqb, s.lo, nq) if nqb > 0 else (
+        np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int64),
+        np.empty(0, np.int64))
+    s.next_query = end
+    first = max(0, end + u_lo)  # the first row a query not yet searched reads
+    s.rows = held[first - s.lo:].copy() if first > s.lo else held
+    s.lo = max(s.lo, first)
+    return result
