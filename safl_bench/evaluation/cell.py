@@ -41,7 +41,7 @@ from safl_bench.evaluation.metrics import (
     outcomes,
     true_place_ranks,
 )
-from safl_bench.matching import blocks
+from safl_bench.matching import blocks, candidates
 from safl_bench.matching.matcher import MatcherConfig, MatchResult
 from safl_bench.matching.settings import (  # noqa: F401  (re-exported: they were defined here)
     DISTANCES,
@@ -241,7 +241,7 @@ def evaluate_method(
     if cfg.sequence.needs_window:  # part of the sequence matcher's time
         window = choose_window(method, d_db, cfg.distance)
     window_s = time.perf_counter() - t0
-    nq, ndb = len(d_q), len(d_db)
+    nq = len(d_q)
     scored = scored_queries(nq, cfg.trim_queries, context)
     part = subset_truth(truth, scored, slice(None)) if scored != slice(0, nq) else truth
     ranks = np.zeros(part.n_queries, np.int64)
@@ -256,6 +256,28 @@ def evaluate_method(
                 db_limit=None if limit is None else limit[lo:hi], dtype=cfg.single_frame.dtype)
 
     configs = [cfg.matcher(mode) for mode in MODES]
+    windows = [window.window if c.needs_window and window else None for c in configs]
+    if cfg.candidates is not None:
+        results, seconds, ranks = _through_candidates(method, d_q, d_db, cfg, configs, windows,
+                                                      limit, part, scored)
+    else:
+        results, seconds = _exact(method, d_q, d_db, cfg, configs, windows, limit, block_mb,
+                                  rank_rows)
+    matches = dict(zip(MODES, results, strict=True))
+    per_query = {mode: match_outcomes(part, subset_result(matches[mode], scored),
+                                      ranks if mode == "single_frame" else None)
+                 for mode in MODES}
+    metrics = {mode: evaluate_outcomes(per_query[mode], recall_at=RECALL_AT) for mode in MODES}
+    return Evaluation(matches, per_query, metrics, describe_s, n, window_s + seconds[0],
+                      window=window)
+
+
+def _exact(method: Method, d_q: np.ndarray, d_db: np.ndarray, cfg: EvaluationConfig,
+           configs: list[MatcherConfig], windows: list[int | None], limit: np.ndarray | None,
+           block_mb: float | None, visit: Any) -> tuple[list[MatchResult], list[float]]:
+    """Both modes by the exact matcher, the difference matrix in query blocks
+    (`safl_bench.matching.blocks`), or whole for a distance that is not row-wise."""
+    nq, ndb = len(d_q), len(d_db)
     step = blocks.block_rows(nq, ndb, block_mb)
     if step >= nq or getattr(method, "rowwise_distance", True):
         def rows(a: int, b: int) -> np.ndarray:
@@ -267,16 +289,38 @@ def evaluate_method(
 
         def rows(a: int, b: int) -> np.ndarray:
             return D[a:b]
-    results, seconds = blocks.match_rows(
-        rows, nq, ndb, configs, db_limit=limit, block=step, visit=rank_rows,
-        windows=[window.window if c.needs_window and window else None for c in configs])
-    matches = dict(zip(MODES, results, strict=True))
-    per_query = {mode: match_outcomes(part, subset_result(matches[mode], scored),
-                                      ranks if mode == "single_frame" else None)
-                 for mode in MODES}
-    metrics = {mode: evaluate_outcomes(per_query[mode], recall_at=RECALL_AT) for mode in MODES}
-    return Evaluation(matches, per_query, metrics, describe_s, n, window_s + seconds[0],
-                      window=window)
+    return blocks.match_rows(rows, nq, ndb, configs, db_limit=limit, block=step, visit=visit,
+                             windows=windows)
+
+
+def _through_candidates(method: Method, d_q: np.ndarray, d_db: np.ndarray,
+                        cfg: EvaluationConfig, configs: list[MatcherConfig],
+                        windows: list[int | None], limit: np.ndarray | None, part: GroundTruth,
+                        scored: slice) -> tuple[list[MatchResult], list[float], np.ndarray]:
+    """Both modes through each query's ``cfg.candidates`` nearest frames
+    (`safl_bench.matching.candidates`), the single-frame ranks among them; the candidate
+    search's time counts to the sequence matcher's."""
+    own = getattr(type(method), "distance", Method.distance) is not Method.distance
+    if cfg.distance == "method" and own:
+        raise ConfigError(f"candidates={cfg.candidates}: the candidate search compares descriptors "
+                          f"by L2, but method {method.name!r} has its own distance; give "
+                          f"--matcher distance=euclidean to search its descriptors by L2, or "
+                          f"leave candidates unset (the exact matcher)")
+    t0 = time.perf_counter()
+    cand = candidates.nearest(d_q, d_db, int(cfg.candidates or 0), index=cfg.index,
+                              db_limit=limit)
+    search_s = time.perf_counter() - t0
+    results, seconds = [], []
+    for c, w in zip(configs, windows, strict=True):
+        t0 = time.perf_counter()
+        results.append(candidates.match_candidates(d_q, d_db, cand, c, db_limit=limit,
+                                                   enhance_window=w,
+                                                   root=cfg.distance == "euclidean"))
+        seconds.append(time.perf_counter() - t0 + search_s)
+    sub = candidates.Candidates(cand.index[scored], cand.distance[scored])
+    ranks = candidates.candidate_ranks(sub, [part.true_matches(i) for i in range(part.n_queries)],
+                                       NOT_RETRIEVED)
+    return results, seconds, ranks
 
 
 def _say_dense(method: Method, nq: int, ndb: int) -> None:

@@ -346,6 +346,8 @@ SETTING_HELP: dict[str, str] = {
     "trim_queries": "queries left out of the metrics at each end of the sequence",
     "distance": "descriptor difference: the method's own (method) or plain L2 (euclidean)",
     "truth_at": "true places within the radius of the query frame's pose, or of its noisy viewpoint",
+    "candidates": "search sequences through each query's K nearest frames only (null: exact)",
+    "index": "the candidates' index: exact nearest frames (flat) or FAISS's IVF (ivf)",
 }
 
 

@@ -5,7 +5,8 @@
 settings follow from it) and evaluation-level settings that reproduce the authors' public
 code, all off by default (the paper's protocol): ``max_frames``, ``trim_queries`` and
 ``distance`` (`safl_bench.evaluation.cell`'s docstring says what each does), and ``truth_at``,
-where a noisy query's true places are measured from (`safl_bench.tasks.task.Task.truth_for`).
+where a noisy query's true places are measured from (`safl_bench.tasks.task.Task.truth_for`),
+and ``candidates``/``index``, the opt-in candidate search (`safl_bench.matching.candidates`).
 It lives with the matcher, not with the evaluation that reads it, so that the presets need
 nothing of a later stage.
 """
@@ -23,10 +24,17 @@ MODES = ("sequence", "single_frame")
 
 
 #: Evaluation-level settings (`EvaluationConfig` fields other than the matcher), as recorded.
-EVALUATION_SETTINGS = ("max_frames", "trim_queries", "distance", "truth_at")
+EVALUATION_SETTINGS = ("max_frames", "trim_queries", "distance", "truth_at", "candidates", "index")
+
+#: The candidate-search settings (`safl_bench.matching.candidates`): recorded only when
+#: ``candidates`` is set, so an exact cell's record reads as it did before they existed.
+CANDIDATE_SETTINGS = ("candidates", "index")
 
 #: How descriptors may be compared (`EvaluationConfig.distance`).
 DISTANCES = ("method", "euclidean")
+
+#: The candidate search's indexes (`safl_bench.matching.candidates.INDEXES`).
+INDEXES = ("flat", "ivf")
 
 #: Where a query's true places are measured from (`EvaluationConfig.truth_at`): the pose of its
 #: frame, or the noisy viewpoint its view was made at (the same for clean queries).
@@ -47,7 +55,8 @@ class EvaluationConfig:
     database AND queries (None: all). trim_queries: leave the first and the last N queries out
     of the metrics (they are still matched, and their trajectories use their neighbours).
     distance: "method" (the method's own difference) or "euclidean" (plain L2 between the
-    descriptors; module docstring). truth_at: "frame" (a query's true places lie within the
+    descriptors; module docstring). candidates: None (the exact matcher) or K, the sequence
+    search through each query's K nearest frames of `index` ("flat" exact, "ivf" approximate). truth_at: "frame" (a query's true places lie within the
     radius of its frame's pose, the paper protocol's default) or "viewpoint" (of the noisy
     viewpoint its view shows, `Task.truth_for`).
     """
@@ -57,6 +66,8 @@ class EvaluationConfig:
     trim_queries: int = 0
     distance: str = "method"
     truth_at: str = "frame"
+    candidates: int | None = None
+    index: str = "flat"
 
     def __post_init__(self) -> None:
         n = self.max_frames
@@ -69,6 +80,12 @@ class EvaluationConfig:
             raise ConfigError(f"distance must be one of {list(DISTANCES)}, got {self.distance!r}")
         if self.truth_at not in TRUTH_AT:
             raise ConfigError(f"truth_at must be one of {list(TRUTH_AT)}, got {self.truth_at!r}")
+        k = self.candidates
+        if k is not None and (not isinstance(k, int) or isinstance(k, bool) or k < 1):
+            raise ConfigError(f"candidates must be null (the exact matcher) or a whole number of "
+                              f"frames >= 1, got {k!r}")
+        if self.index not in INDEXES:
+            raise ConfigError(f"index must be one of {list(INDEXES)}, got {self.index!r}")
 
     @property
     def single_frame(self) -> MatcherConfig:
@@ -91,7 +108,8 @@ class EvaluationConfig:
     def to_dict(self) -> dict[str, Any]:
         """What records store: each mode's matcher settings, and the evaluation-level ones."""
         out: dict[str, Any] = {mode: self.matcher(mode).to_dict() for mode in MODES}
-        out["evaluation"] = {name: getattr(self, name) for name in EVALUATION_SETTINGS}
+        out["evaluation"] = {name: getattr(self, name) for name in EVALUATION_SETTINGS
+                             if self.candidates is not None or name not in CANDIDATE_SETTINGS}
         return out
 
     @classmethod
