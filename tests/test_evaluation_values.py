@@ -109,7 +109,8 @@ def test_settings_record_and_read_back() -> None:
     for bad in ({"sequence": {}, "evaluation": {"max_frames": 1, "other": 0}},
                 {"sequence": {}, "evaluation": [1]}):
         with pytest.raises(ConfigError, match=r"^evaluation settings: expected keys of "
-                                              r"\['max_frames', 'trim_queries', 'distance', 'truth_at'\], got "):
+                                              r"\['max_frames', 'trim_queries', 'distance', 'truth_at', "
+                                              r"'candidates', 'index'\], got "):
             EvaluationConfig.from_dict(bad)  # type: ignore[arg-type]
 
 

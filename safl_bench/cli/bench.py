@@ -2,8 +2,10 @@
 
   safl-bench bench methods [--method NAME ...]   descriptor ms/frame at batch 1 (Table III),
                                                  batched throughput, 4541² difference matrix
-  safl-bench bench matcher [--n 4541]            descriptors -> matches on a KITTI-00-sized
-                                                 problem, peak memory, ratio to the plain loop
+  safl-bench bench matcher [--n 4541] [--dim 1024] [--mode exact|candidates] [--k 10]
+                                                 descriptors -> matches, N x N, a planted route
+                                                 checked; side by side with the dense path where
+                                                 it fits; peak memory, ratio to the plain loop
   safl-bench bench parallel [--workers 2]        map building 1 worker against N, seconds per
                                                  cell serially, on local workers and on Ray
   safl-bench bench images --bev-root DIR         reading a top-view image sequence, cold and
@@ -44,6 +46,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="frames per timed batch-1 run (default 50; bevplace: 8)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs; the median is printed (default 5)")
     parser.add_argument("--n", type=int, default=4541, help="frames of the difference matrix (default 4541, KITTI 00); 0 skips it")
+    parser.add_argument("--dim", type=int, default=1024, help="matcher: descriptor length (default 1024)")
+    parser.add_argument("--mode", choices=("exact", "candidates"), default="exact",
+                        help="matcher: the exact matcher in query blocks, or the candidate search (default exact)")
+    parser.add_argument("--k", type=int, default=10, help="matcher: candidates per query in candidate mode (default 10)")
+    parser.add_argument("--index", choices=("flat", "ivf"), default="flat",
+                        help="matcher: the candidates' FAISS index, exact (flat) or approximate (ivf) (default flat)")
+    parser.add_argument("--block-mb", default=None, metavar="MB",
+                        help="matcher: the exact mode's memory budget per query block (default $SAFL_BLOCK_MB or 1024)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     parser.add_argument("--sequence", default="00", help="parallel: the sequence whose maps are built (default 00)")
     parser.add_argument("--step", type=int, default=1, help="parallel: frame step (default 1: every frame)")
@@ -123,7 +133,11 @@ def main(args: argparse.Namespace) -> int:
     if args.what == "matcher":
         from safl_bench.bench import matching_bench
 
-        argv = ["--n", str(args.n or 4541), "--repeats", str(args.repeats)]
+        argv = ["--n", str(args.n or 4541), "--repeats", str(args.repeats),
+                "--dim", str(args.dim), "--mode", args.mode, "--k", str(args.k),
+                "--index", args.index]
+        if args.block_mb is not None:
+            argv += ["--block-mb", str(args.block_mb)]
         if args.json:
             argv += ["--json", args.json]
         return matching_bench.main(argv)

@@ -176,6 +176,14 @@ def main(args: argparse.Namespace) -> int:
     # a version without them fails here, before any work
     built = {source: [make_method(name, weights=args.weights, source=source, **params)
                       for name in names] for source in by_source}
+    if options.evaluation.candidates is not None:  # before any work: a method it cannot search
+        from safl_bench.evaluation.cell import check_candidates
+        from safl_bench.matching.candidates import faiss_module
+
+        faiss_module()
+        for methods in built.values():
+            for method in methods:
+                check_candidates(method, options.evaluation)
     outcomes = []
     ran: list[str] = []
     for source, ids in by_source.items():

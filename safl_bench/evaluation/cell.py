@@ -293,6 +293,19 @@ def _exact(method: Method, d_q: np.ndarray, d_db: np.ndarray, cfg: EvaluationCon
                              windows=windows)
 
 
+def check_candidates(method: Any, cfg: EvaluationConfig) -> None:
+    """A ConfigError when `cfg` asks for the candidate search and `method`'s descriptors cannot
+    be searched by L2 (its own distance, under ``distance=method``); nothing else."""
+    if cfg.candidates is None or is_retrieval(method):
+        return
+    own = getattr(type(method), "distance", Method.distance) is not Method.distance
+    if cfg.distance == "method" and own:
+        raise ConfigError(f"candidates={cfg.candidates}: the candidate search compares descriptors "
+                          f"by L2, but method {method.name!r} has its own distance; give "
+                          f"--matcher distance=euclidean to search its descriptors by L2, or "
+                          f"leave candidates unset (the exact matcher)")
+
+
 def _through_candidates(method: Method, d_q: np.ndarray, d_db: np.ndarray,
                         cfg: EvaluationConfig, configs: list[MatcherConfig],
                         windows: list[int | None], limit: np.ndarray | None, part: GroundTruth,
@@ -300,12 +313,7 @@ def _through_candidates(method: Method, d_q: np.ndarray, d_db: np.ndarray,
     """Both modes through each query's ``cfg.candidates`` nearest frames
     (`safl_bench.matching.candidates`), the single-frame ranks among them; the candidate
     search's time counts to the sequence matcher's."""
-    own = getattr(type(method), "distance", Method.distance) is not Method.distance
-    if cfg.distance == "method" and own:
-        raise ConfigError(f"candidates={cfg.candidates}: the candidate search compares descriptors "
-                          f"by L2, but method {method.name!r} has its own distance; give "
-                          f"--matcher distance=euclidean to search its descriptors by L2, or "
-                          f"leave candidates unset (the exact matcher)")
+    check_candidates(method, cfg)
     t0 = time.perf_counter()
     cand = candidates.nearest(d_q, d_db, int(cfg.candidates or 0), index=cfg.index,
                               db_limit=limit)

@@ -26,7 +26,12 @@ numbers as in one call over all queries. A method whose distance is not row-wise
 whole matrix (`safl_bench.evaluation.cell` says so in one line).
 
 Memory. Per block: the block's difference rows, each matcher setting's enhanced rows plus the
-trajectory's rows before and after the block, in the matcher's dtype. `block_rows` sizes the
+trajectory's rows before and after the block, in the matcher's dtype (a setting without
+enhancement and without trajectory, single-frame matching, reads the difference rows as they are).
+The default budget, 2 GB, keeps blocks of whole multiples of 1024 rows up to databases of
+about 170 000 frames. Beyond that, or under a smaller budget, a block holds fewer than 1024
+rows, and BLAS may round the last bit of a distance differently for a smaller product than
+for the 1024-row one; matches are still the same for the same budget, run after run. `block_rows` sizes the
 block so that this stays under a budget (`DEFAULT_BLOCK_MB`, or ``SAFL_BLOCK_MB``, or the
 ``--block-mb`` option of ``safl-bench run``): peak memory grows with Ndb (one row), not with
 Nq x Ndb. The budget changes no result: it is not a matcher setting and records do not carry it.
@@ -55,7 +60,7 @@ from safl_bench.matching.matcher import (
 )
 
 #: The memory budget (MB) of one block's rows when none is given and ``SAFL_BLOCK_MB`` is unset.
-DEFAULT_BLOCK_MB = 1024
+DEFAULT_BLOCK_MB = 2048
 #: The environment variable that sets the budget for every run of this process and its workers.
 BLOCK_MB_ENV = "SAFL_BLOCK_MB"
 #: Blocks are whole multiples of this many rows (the query chunk of `methods.distance`), when
@@ -166,14 +171,17 @@ def _advance(s: _Stream, arr: np.ndarray, a: int, b: int, nq: int,
     no later query reads; the search's outputs for those queries."""
     u_lo, u_hi = s.cfg.u_range()
     keep = s.rows
-    held = np.empty((len(keep) + (b - a), arr.shape[1]), dtype=arr.dtype)
-    held[:len(keep)] = keep
     w = s.window
-    if w > 0:
-        before, after = (w // 2, w // 2) if s.cfg.enhance_mode == "centred" else (w, 0)
-        _enhance_kernel(arr, held[len(keep):], before, after)
+    if w == 0 and not len(keep):  # nothing to add to: read the rows as they are
+        held = arr
     else:
-        held[len(keep):] = arr
+        held = np.empty((len(keep) + (b - a), arr.shape[1]), dtype=arr.dtype)
+        held[:len(keep)] = keep
+        if w > 0:
+            before, after = (w // 2, w // 2) if s.cfg.enhance_mode == "centred" else (w, 0)
+            _enhance_kernel(arr, held[len(keep):], before, after)
+        else:
+            held[len(keep):] = arr
     if s.cfg.shift:
         s.minimum = min(s.minimum, float(held[len(keep):].min()))
     end = nq if b == nq else max(s.next_query, b - u_hi)

@@ -148,8 +148,15 @@ def _preset(name: str, description: str, citations: dict[str, str], max_frames: 
                                                       max_frames=max_frames,
                                                       trim_queries=trim_queries,
                                                       distance=distance),
-                  {"truth_at": _TRUTH_AT, **citations})
+                  {"truth_at": _TRUTH_AT, "candidates": _CANDIDATES, "index": _CANDIDATES,
+                   **citations})
 
+
+#: No preset searches through candidates: the paper, the authors' code and OpenSeqSLAM all
+#: match against every database frame.
+_CANDIDATES = ("none of the paper, the authors' code and OpenSeqSLAM prunes candidates: every "
+               "database frame (the exact matcher); candidates=K is this project's opt-in "
+               "(safl_bench/matching/candidates.py)")
 
 #: Every preset measures true places from the frame's pose: the paper does not say, and the
 #: authors' scoring reads the test folder's own pose.txt (plotDraw_slfl.py:58-60, 113-117 at
