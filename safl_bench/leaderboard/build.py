@@ -269,6 +269,16 @@ def build_leaderboard(
         if figures:
             report.ranking_figure = writer.figure(RANKING_PNG, partial(ranking.figure, comps))
 
+    from safl_bench.leaderboard import scaling
+
+    runs, scaling_problems = scaling.load(out / scaling.FOLDER)
+    report.problems.extend(scaling_problems)
+    if runs:
+        report.scaling = runs
+        writer.text(scaling.MD, scaling.markdown(runs))
+        if figures:
+            report.scaling_figure = writer.figure(scaling.PNG, partial(scaling.figure, runs))
+
     training: list[tuple[str, str, list[str]]] = []
     if training_logs is not None:
         logs, log_problems = load_training_logs(training_logs)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from safl_bench.leaderboard.grouping import TableKey
 from safl_bench.leaderboard.ranking import Comparison
@@ -61,6 +62,10 @@ class BuildReport:
     ranking: list[Comparison] = field(default_factory=list)
     ranking_md: str | None = None
     ranking_figure: str | None = None
+    #: the matcher's scaling runs (`scaling.load`: experiments/matcher-scaling/*.json), and
+    #: the figure drawn of them (None: not drawn)
+    scaling: list[dict[str, Any]] = field(default_factory=list)
+    scaling_figure: str | None = None
 
 
 def headline_rank(key: TableKey) -> tuple[object, ...]:

@@ -47,6 +47,7 @@ SITE_DIR = "site"
 INDEX = "index.html"
 ALL = "all.html"
 RANKING = "ranking.html"
+SCALING = "speed.html"
 #: The image-fidelity figure `safl-bench data fidelity --out` writes beside the board (it needs
 #: real KITTI's images, so the build shows it when it is there and never draws it).
 FIDELITY_PNG = "fidelity/fidelity.png"
@@ -140,6 +141,8 @@ def write_site(
     nav = [(INDEX, "Headline"), *((p.file, p.title) for p in pages), (ALL, "All tables")]
     if report.ranking:
         nav.insert(1, (RANKING, "Synthetic vs real KITTI"))
+    if report.scaling:
+        nav.insert(len(nav) - 1, (SCALING, "Matcher speed"))
     skipped = [_problem_line(p, problem_base) for p in problems]
     written: list[Path] = []
 
@@ -167,6 +170,8 @@ def write_site(
         emit(page.file, body, page.title, page.tables)
     if report.ranking:
         emit(RANKING, lambda reg: _ranking_body(report, out), "Synthetic vs real KITTI", [])
+    if report.scaling:
+        emit(SCALING, lambda reg: _scaling_body(report, out), "Matcher speed", [])
     every = [t for page in pages for t in page.tables]
     emit(ALL, lambda reg: "<h1>All tables</h1>" + "".join(_table_section(t, out, reg) for t in every),
          "All tables", every)
@@ -476,6 +481,21 @@ def _ranking_body(report: BuildReport, out: Path) -> str:
             f'<section id="ranking"><div class="scroll"><table><thead><tr>{head}</tr></thead>'
             f"<tbody>{body}</tbody></table></div><ul>{notes}</ul>"
             f'<div class="figures">{figs}</div></section>')
+
+
+def _scaling_body(report: BuildReport, out: Path) -> str:
+    """The matcher's speed page (`scaling`): the runs' table and the curve."""
+    from safl_bench.leaderboard import scaling
+
+    rows = scaling.rows(report.scaling)
+    head = "".join(f"<th>{_e(c)}</th>" for c in rows[0])
+    body = "".join("<tr>" + "".join(f"<td>{_inline_code(c)}</td>" for c in r) + "</tr>"
+                   for r in rows[1:])
+    figs = (_figure(out, report.scaling_figure, "Time and peak memory against frames")
+            if report.scaling_figure else "")
+    return (f"<h1>{_e(scaling.TITLE)}</h1><p>{_inline_code(scaling.INTRO)}</p>"
+            f'<section id="scaling"><div class="figures">{figs}</div><div class="scroll"><table>'
+            f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div></section>")
 
 
 def _slam_section(out: Path, key: TableKey | None) -> str:
