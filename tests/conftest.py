@@ -156,3 +156,12 @@ def write_bev(root: Path, name: str = "00", n: int = 40, size: int = 41, times: 
 def bev_root(tmp_path: Path) -> Path:
     """A private top-view image folder with sequence "00" (40 frames of 41 x 41)."""
     return write_bev(tmp_path / "bev")
+
+
+@pytest.fixture(autouse=True)
+def _task_warnings_anew() -> Iterator[None]:
+    """Each test sees the registry's once-per-process task warnings afresh."""
+    import importlib
+
+    importlib.import_module("safl_bench.tasks.registry")._WARNED.clear()
+    yield

@@ -534,3 +534,12 @@ def test_a_task_id_without_its_namespace_is_refused_with_the_full_id_suggested(
     assert cli_main(["run", "--method", "sad", "--task", "Synth09-T1R1-v5", "--results", "unused"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].endswith("Did you mean: SAFL/Synth09-T1R1-v5?")
+
+
+def test_an_old_task_version_is_warned_about_once() -> None:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(9):
+            tasks.spec("SAFL/Synth00-T1R1-v4")
+    assert [str(w.message) for w in caught] == [
+        "task SAFL/Synth00-T1R1-v4 is superseded by SAFL/Synth00-T1R1-v6"]

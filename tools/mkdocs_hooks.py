@@ -1,7 +1,8 @@
 """MkDocs hooks: pages generated from the code at build time, so the docs cannot drift.
 
-`<!-- cli-reference -->` in a page becomes the help of every `safl-bench` command, printed by
-the parser itself (`safl_bench.cli.reference`).
+The `<!-- cli-reference:start ... -->` block of a page becomes the help of every `safl-bench`
+command, printed by the parser itself (`safl_bench.cli.reference`), as the committed page holds
+it when it is current.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-CLI_MARKER = "<!-- cli-reference -->"
+CLI_MARKER = "<!-- cli-reference:start"
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -23,7 +24,7 @@ def on_config(config: Any) -> Any:
 
 def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
     if CLI_MARKER in markdown:
-        from safl_bench.cli.reference import cli_reference_markdown
+        from safl_bench.cli.reference import with_reference
 
-        markdown = markdown.replace(CLI_MARKER, cli_reference_markdown())
+        markdown = with_reference(markdown)
     return markdown

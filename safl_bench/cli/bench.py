@@ -66,8 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bev-root", metavar="DIR", default=None,
                         help="images, seeds: the top-view image folders (BEVPlace's layout); --sequence picks one")
     parser.add_argument("--reference", metavar="DIR", default=None,
-                        help="bevplace: the authors' code (the folder holding network/, e.g. "
-                             "../shared/bevplace/reference-52f31362), timed side by side")
+                        help="bevplace: the authors' code (a checkout of zjuluolun/BEVPlace, the folder "
+                             "holding network/), timed side by side")
     parser.add_argument("--checkpoint", metavar="FILE", default=None,
                         help="bevplace: the authors' checkpoint for their code (default: the shipped weights, the same tensors)")
     parser.add_argument("--batch-size", type=int, default=4, help="bevplace: frames per batch when batched (default 4)")
@@ -195,8 +195,8 @@ def _seeds(args: argparse.Namespace) -> int:
 
     bev_root = args.bev_root or os.environ.get("SAFL_BEV_ROOT")
     if bev_root is None:
-        raise ConfigError("bench seeds needs --bev-root DIR (top-view image folders, e.g. "
-                          "../shared/kitti-topviews) or $SAFL_BEV_ROOT")
+        raise ConfigError("bench seeds needs --bev-root DIR (top-view image folders in "
+                          "BEVPlace's layout, e.g. BEVPlace/data/KITTI) or $SAFL_BEV_ROOT")
     result = seeds_bench.run(bev_root, args.method, task_id=args.task or seeds_bench.DEFAULT_TASK,
                              repeats=args.repeats)
     print(seeds_bench.format_results(result))

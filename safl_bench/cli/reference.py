@@ -1,7 +1,9 @@
 """The command-line reference, printed from the parser itself (the docs' "Command line" page).
 
 `commands()` walks `build_parser()`'s sub-parsers, so a command or option added to the CLI shows
-up in the docs without anyone writing it down.
+up in the docs without anyone writing it down. The page in the repository holds the output
+between `START` and `END`, so that it reads on the repository's page too; a test fails when it
+is stale, and ``python -m safl_bench.cli.reference`` rewrites it.
 """
 
 from __future__ import annotations
@@ -9,8 +11,14 @@ from __future__ import annotations
 import argparse
 import os
 from collections.abc import Iterator
+from pathlib import Path
 
 from safl_bench.cli import build_parser
+
+START = "<!-- cli-reference:start (generated: python -m safl_bench.cli.reference) -->"
+END = "<!-- cli-reference:end -->"
+#: The committed page that holds the reference.
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "reference" / "cli.md"
 
 
 def commands(parser: argparse.ArgumentParser | None = None,
@@ -41,3 +49,26 @@ def cli_reference_markdown() -> str:
             os.environ.pop("COLUMNS", None)
         else:
             os.environ["COLUMNS"] = previous
+
+
+def with_reference(page: str) -> str:
+    """`page` with the text between `START` and `END` replaced by `cli_reference_markdown`."""
+    head, start, rest = page.partition(START)
+    _, end, tail = rest.partition(END)
+    if not start or not end:
+        raise ValueError(f"the page has no {START} ... {END} block")
+    return f"{head}{START}\n\n{cli_reference_markdown()}\n{END}{tail}"
+
+
+def main() -> int:
+    """Rewrite the committed page's reference block."""
+    text = PAGE.read_text(encoding="utf-8")
+    new = with_reference(text)
+    if new != text:
+        PAGE.write_text(new, encoding="utf-8")
+        print(f"rewrote {PAGE}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -109,17 +109,31 @@ def main(args: argparse.Namespace) -> int:
     cell_seed = registered.seed if args.seed is None else int(args.seed)
     cls = method_class(resolve_method(args.method, registered.source))
 
+    def make_it(task_id: str) -> str:
+        """The run command that makes the cell's record, with this command's own data and
+        results options, so that it writes where this command reads."""
+        from safl_bench.analysis.explain import run_command
+
+        flags = {"--kitti-root": args.kitti_root, "--bev-root": getattr(args, "bev_root", None)}
+        return run_command(f"{cls.name}@{cls.version}", task_id, seed=cell_seed,
+                           results=args.results, source_options=flags)
+
     def _existing(path: Path) -> Path:
         if not path.is_file():
-            raise DataError(f"no record {path}; make it with safl-bench run")
+            raise DataError(f"no record {path}; make it with: {make_it(registered.id)}")
         return path
 
     def record_of(task_id: str) -> ResultRecord:
         path = record_path(results, cls.name, cls.version, task_id, cell_seed)
         if not path.is_file():
+            from safl_bench.methods.method import method_versions
+
+            held = [v for v in method_versions(cls.name) if v != cls.version and record_path(
+                results, cls.name, v, task_id, cell_seed).is_file()]
+            other = (f"; {', '.join(f'{cls.name}@{v}' for v in held)} has one: pass "
+                     f"--method {cls.name}@{held[-1]}") if held else ""
             raise DataError(f"no record of {cls.name}@{cls.version} on {task_id} seed {cell_seed} in "
-                            f"{results}; make it with: safl-bench run --method "
-                            f"{cls.name}@{cls.version} --task {task_id} --seed {cell_seed}")
+                            f"{results}{other}; or make it with: {make_it(task_id)}")
         return load_record(path)
 
     record = record_of(registered.id)

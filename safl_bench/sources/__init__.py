@@ -57,7 +57,7 @@ ROT_ROOT_OPTION = "--bev-rot-root DIR"
 __all__ = [
     "BEV_ROOT_ENV", "BEV_ROT_ROOT_ENV", "DEFAULT_RESOLUTION_M", "KINDS", "ROT_ROOT_OPTION",
     "BevSource", "DataSource", "KittiSource", "SynthSource", "bev_source", "kitti_source",
-    "open_query_source", "open_source", "real_roots", "resolve_source", "root_options",
+    "missing_data", "open_query_source", "open_source", "real_roots", "resolve_source", "root_options",
     "synth_source",
 ]
 
@@ -124,6 +124,29 @@ def open_source(spec: SourceSpec, *, kitti_root: str | None = None, bev_root: st
     if rotated is not None:
         return bev_source(value, bev_resolution_m, ROTATED_LABELS[rotated])
     return bev_source(value, bev_resolution_m)
+
+
+def missing_data(spec: SourceSpec, *, kitti_root: str | None = None, bev_root: str | None = None,
+                 bev_rot_root: str | None = None) -> str | None:
+    """What `open_source` and `open_query_source` would refuse for want of a data folder (the
+    option or environment variable that names it), without opening anything; None when every
+    folder the task reads is named. Commands call it before any work."""
+    from safl_bench import paths
+
+    if spec.source == "synth":
+        return None
+    rotated = getattr(spec, "rotated", None)
+    if spec.source == "bev" and rotated in ("both", "queries") and not (
+            bev_rot_root or os.environ.get(BEV_ROT_ROOT_ENV)):
+        return (f"task {spec.id} needs the rotated top-view images (BEVPlace's KITTIRot): pass "
+                f"{ROT_ROOT_OPTION} or set {BEV_ROT_ROOT_ENV}")
+    if rotated == "both":
+        return None
+    explicit = kitti_root if spec.source == "kitti" else bev_root
+    env = paths.KITTI_ROOT_ENV if spec.source == "kitti" else BEV_ROOT_ENV
+    if not (explicit or os.environ.get(env)):
+        return f"task {spec.id} needs its data: pass {ROOT_OPTION[spec.source]} or set {env}"
+    return None
 
 
 def _rot_root(spec: SourceSpec, bev_rot_root: str | None) -> str:

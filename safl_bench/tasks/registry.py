@@ -82,12 +82,17 @@ def _unknown(task_id: str) -> RegistryError:
     return RegistryError(f"unknown task {task_id!r}.{hint}")
 
 
+#: Task ids `spec` has warned about in this process (each warning is printed once).
+_WARNED: set[str] = set()
+
+
 def spec(task_id: str) -> TaskSpec:
     """The spec of `task_id`; an id without version picks the latest version (with a warning)."""
     if task_id in registry:
         found = registry[task_id]
         latest = _versions(found.namespace, found.name)[-1]
-        if latest > found.version:
+        if latest > found.version and task_id not in _WARNED:
+            _WARNED.add(task_id)  # once per task and process, whichever caller asks first
             warnings.warn(
                 f"task {task_id} is superseded by {make_id(found.namespace, found.name, latest)}",
                 stacklevel=2,
@@ -102,7 +107,9 @@ def spec(task_id: str) -> TaskSpec:
         raise _unknown(task_id)
     if version is None:
         chosen = make_id(namespace, name, versions[-1])
-        warnings.warn(f"using the latest version {chosen} for {task_id}", stacklevel=2)
+        if task_id not in _WARNED:
+            _WARNED.add(task_id)
+            warnings.warn(f"using the latest version {chosen} for {task_id}", stacklevel=2)
         return registry[chosen]
     listed = ", ".join(f"v{v}" for v in versions)
     raise RegistryError(f"task {task_id} has no version v{version}; registered versions: {listed}")

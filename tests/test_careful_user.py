@@ -1,0 +1,46 @@
+"""What a careful user trips on (issue 47): options checked before any work, hints that carry the
+user's own options and name the versions that have records, a warning printed once."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from safl_bench.cli import main
+from safl_bench.results.records import record_path
+from safl_bench.tasks.registry import runnable_spec
+
+
+def test_a_missing_data_folder_stops_run_before_any_work(capsys: pytest.CaptureFixture[str],
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("SAFL_BEV_ROOT", raising=False)
+    monkeypatch.delenv("SAFL_BEV_ROT_ROOT", raising=False)
+    assert main(["run", "--method", "sad", "--task", "SAFL/BEVKITTI00-Revisit-v0",
+                 "--task", "SAFL/BEVKITTI02-Revisit-v0"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""  # nothing started
+    assert err.strip() == ("safl-bench: error: task SAFL/BEVKITTI00-Revisit-v0 needs its data: "
+                           "pass --bev-root DIR or set SAFL_BEV_ROOT (and 1 more tasks)")
+    assert main(["run", "--method", "sad", "--task", "SAFL/BEVKITTI00-Revisit-RotQueries-v0",
+                 "--bev-root", "somewhere"]) == 2
+    assert "needs the rotated top-view images" in capsys.readouterr().err
+
+
+def test_slam_names_the_version_that_has_a_record_and_keeps_the_options(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    task = "SAFL/BEVKITTI00-Revisit-v0"
+    seed = runnable_spec(task).seed
+    from safl_bench.methods.method import resolve_method
+
+    picked = resolve_method("stable_afl", "bev").partition("@")[2]
+    other = "1" if picked != "1" else "2"
+    path = record_path(tmp_path, "stable_afl", other, task, seed)
+    path.parent.mkdir(parents=True)
+    path.write_text("{}")
+    assert main(["slam", "--method", "stable_afl", "--task", task, "--results", str(tmp_path),
+                 "--bev-root", "BEVPlace/data/KITTI"]) == 2
+    err = capsys.readouterr().err
+    assert f"no record of stable_afl@{picked} on {task}" in err
+    assert f"stable_afl@{other} has one: pass --method stable_afl@{other}" in err
+    assert f"--results {tmp_path}" in err and "--bev-root BEVPlace/data/KITTI" in err
