@@ -44,3 +44,15 @@ def test_slam_names_the_version_that_has_a_record_and_keeps_the_options(
     assert f"no record of stable_afl@{picked} on {task}" in err
     assert f"stable_afl@{other} has one: pass --method stable_afl@{other}" in err
     assert f"--results {tmp_path}" in err and "--bev-root BEVPlace/data/KITTI" in err
+
+
+def test_a_long_describe_prints_lines_in_a_log(monkeypatch: pytest.MonkeyPatch) -> None:
+    from safl_bench.run import runner
+
+    lines: list[str] = []
+    frames = runner._CellFrames("SAFL/X frames", bar=False, log=lines.append)
+    frames.expect(100)
+    frames.advance(10)  # too soon for a line
+    monkeypatch.setattr(runner._CellFrames, "LOG_EVERY_S", 0.0)
+    frames.advance(40)
+    assert lines == ["  SAFL/X frames: 50 of 100 described (50 %)"]

@@ -567,7 +567,8 @@ def run_grid(
         for k, i in enumerate(bar, 1):
             method, task_id, opts = cells[i]
             bar.set_postfix_str(task_id)
-            frames = _CellFrames(f"{task_id} frames", bars)
+            frames = _CellFrames(f"{task_id} frames", bars,
+                                 say if options.progress and not bars else None)
             t0 = time.perf_counter()
             try:
                 if i in evaluated:
@@ -621,10 +622,14 @@ class _CellFrames:
     """The frames of one cell (`safl_bench.common.progress.FrameProgress`): counted for its
     line in a log, and shown by a bar under the grid's (removed when the cell ends) when `bar`."""
 
-    def __init__(self, label: str, bar: bool) -> None:
-        self.label, self.bar = label, bar
+    #: In a log (no bar), a line at most this often while frames are being described.
+    LOG_EVERY_S = 30.0
+
+    def __init__(self, label: str, bar: bool, log: Callable[[str], None] | None = None) -> None:
+        self.label, self.bar, self.log = label, bar, log
         self.total = self.done = 0
         self._bar: Any = None
+        self._said = time.monotonic()
 
     def expect(self, n: int) -> None:
         self.total += n
@@ -640,6 +645,10 @@ class _CellFrames:
         self.done += n
         if self._bar is not None:
             self._bar.update(n)
+        elif self.log is not None and time.monotonic() - self._said >= self.LOG_EVERY_S:
+            self._said = time.monotonic()
+            share = f" ({100 * self.done / self.total:.0f} %)" if self.total else ""
+            self.log(f"  {self.label}: {self.done} of {self.total} described{share}")
 
     def __enter__(self) -> _CellFrames:
         return self
