@@ -56,3 +56,13 @@ def test_a_long_describe_prints_lines_in_a_log(monkeypatch: pytest.MonkeyPatch) 
     monkeypatch.setattr(runner._CellFrames, "LOG_EVERY_S", 0.0)
     frames.advance(40)
     assert lines == ["  SAFL/X frames: 50 of 100 described (50 %)"]
+
+
+def test_train_resolves_a_bare_name_as_run_does(capsys: pytest.CaptureFixture[str]) -> None:
+    from safl_bench.methods.method import resolve_method
+
+    # a parameter it does not have stops it after the version is picked, before any work
+    assert main(["train", "--method", "stable_afl", "--set", "nope=1"]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith(f"training {resolve_method('stable_afl', 'synth')}: a bare 'stable_afl' "
+                          "is the version `run` runs on")

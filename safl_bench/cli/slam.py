@@ -108,6 +108,9 @@ def main(args: argparse.Namespace) -> int:
     registered = runnable_spec(args.task)
     cell_seed = registered.seed if args.seed is None else int(args.seed)
     cls = method_class(resolve_method(args.method, registered.source))
+    if "@" not in args.method and cls.trainable:  # which version a bare name means, as run says
+        print(f"{cls.name}@{cls.version}: what a bare {args.method!r} runs on this task's data "
+              f"(the newest version with weights for it)", flush=True)
 
     def make_it(task_id: str) -> str:
         """The run command that makes the cell's record, with this command's own data and

@@ -134,12 +134,18 @@ def main(args: argparse.Namespace) -> int:
     import torch
 
     from safl_bench import paths
-    from safl_bench.methods.method import method_class, method_input
+    from safl_bench.methods.method import SOURCE_WORDS, method_class, method_input, resolve_method
     from safl_bench.methods.training import CHECKPOINT, AdversarialMethod, save_reconstructions
     from safl_bench.results import provenance
     from safl_bench.sources import DataSource, bev_source, kitti_source, synth_source
 
-    cls = method_class(args.method)
+    # a bare name is the version `run` runs on this data (`resolve_method`), as in every command
+    picked = resolve_method(args.method, source_kind(args))
+    cls = method_class(picked)
+    if "@" not in args.method and cls.trainable:
+        where = SOURCE_WORDS.get(source_kind(args), (source_kind(args), ""))[0]
+        print(f"training {picked}: a bare {args.method!r} is the version `run` runs on {where} "
+              f"(the newest with weights for it); name another as {cls.name}@VERSION", flush=True)
     if not (cls.trainable and issubclass(cls, AdversarialMethod)):
         raise ConfigError(f"method {args.method!r} has nothing to train")
     if args.step < 1:
