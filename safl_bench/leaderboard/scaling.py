@@ -90,40 +90,38 @@ def markdown(runs: list[dict[str, Any]]) -> str:
 
 def figure(runs: list[dict[str, Any]], path: Path) -> None:
     """Seconds and peak MB against frames (log-log), a line per mode and dim, the dense path's
-    points where it ran."""
-    import matplotlib
+    points where it ran (`figures`' canvas and PNG writer: the same runs, the same bytes)."""
+    import matplotlib.style
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from safl_bench.leaderboard.figures import _new_figure, save_png
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     series: dict[str, list[dict[str, Any]]] = {}
-    dense: dict[int, list[tuple[int, float, float | None]]] = {}
+    dense: dict[int, set[tuple[int, float, float]]] = {}
     for r in runs:
         series.setdefault(f"{_mode(r)}, {r['dim']}-d", []).append(r)
         if r.get("dense"):
-            dense.setdefault(r["dim"], []).append((r["frames"], r["dense"]["seconds"],
-                                                   r["dense"].get("peak_mb")))
-    for label, items in sorted(series.items()):
-        items.sort(key=lambda r: r["frames"])
-        n = [r["frames"] for r in items]
-        axes[0].plot(n, [r["seconds"] for r in items], "o-", label=label)
-        axes[1].plot(n, [r["peak_mb"] or float("nan") for r in items], "o-", label=label)
-    for dim, pts in sorted(dense.items()):
-        pts = sorted(set(pts))
-        axes[0].plot([p[0] for p in pts], [p[1] for p in pts], "k^--",
-                     label=f"dense (whole matrix), {dim}-d")
-        axes[1].plot([p[0] for p in pts], [p[2] or float("nan") for p in pts], "k^--",
-                     label=f"dense (whole matrix), {dim}-d")
-    for ax, what in zip(axes, ("seconds, descriptors to matches", "peak extra memory (MB)"),
-                        strict=True):
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("frames (queries = database)")
-        ax.set_ylabel(what)
-        ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=8)
-    fig.suptitle("Matcher scaling on 2 cores (safl-bench bench matcher)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+            dense.setdefault(r["dim"], set()).add(
+                (r["frames"], r["dense"]["seconds"], r["dense"].get("peak_mb") or float("nan")))
+    with matplotlib.style.context("default"):
+        fig = _new_figure(11, 4.4)
+        axes = fig.subplots(1, 2)
+        for label, items in sorted(series.items()):
+            items.sort(key=lambda r: r["frames"])
+            n = [r["frames"] for r in items]
+            axes[0].plot(n, [r["seconds"] for r in items], "o-", label=label)
+            axes[1].plot(n, [r["peak_mb"] or float("nan") for r in items], "o-", label=label)
+        for dim, pts in sorted(dense.items()):
+            ordered = sorted(pts)
+            for ax, col in ((axes[0], 1), (axes[1], 2)):
+                ax.plot([p[0] for p in ordered], [p[col] for p in ordered], "k^--",
+                        label=f"dense (whole matrix), {dim}-d")
+        for ax, what in zip(axes, ("seconds, descriptors to matches", "peak extra memory (MB)"),
+                            strict=True):
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel("frames (queries = database)")
+            ax.set_ylabel(what)
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0].legend(fontsize=8)
+        fig.suptitle("Matcher scaling on the 2-core development machine (safl-bench bench matcher)")
+        save_png(fig, path)

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -53,9 +54,12 @@ def trajectory_figure(cell: CellTrajectories, path: Path) -> None:
         ax.plot(trajectory[:, 0], trajectory[:, 1], color=BACKEND_COLOURS.get(b.backend), lw=1.0,
                 label=f"{b.backend} (ATE {b.ate_m:.2f} m)", zorder=3)
     threshold = "no closure" if r.threshold is None else f"threshold {r.threshold:.4g}"
-    ax.set_title(f"{r.method} on {r.task}, SLAM seed {r.slam_seed}, {r.settings['mode']} matches, "
-                 f"{threshold}\n({r.threshold_rule}); drift {r.drift['level']}; trajectories "
-                 "unaligned, from the true start", fontsize=8)
+    title = (f"{r.method} on {r.task}, SLAM seed {r.slam_seed}, {r.settings['mode']} matches, "
+             f"{threshold} ({r.threshold_rule}); drift {r.drift['level']}; trajectories "
+             "unaligned, from the true start")
+    # wrapped to the figure's width (about 120 characters of 8 pt on 9 inches): a long threshold
+    # rule used to run off the picture
+    ax.set_title("\n".join(textwrap.wrap(title, 110)), fontsize=8)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal", adjustable="datalim")
