@@ -66,3 +66,27 @@ def test_train_resolves_a_bare_name_as_run_does(capsys: pytest.CaptureFixture[st
     out = capsys.readouterr().out
     assert out.startswith(f"training {resolve_method('stable_afl', 'synth')}: a bare 'stable_afl' "
                           "is the version `run` runs on")
+
+
+def test_timings_under_load_and_old_timings_are_marked() -> None:
+    import dataclasses
+
+    from record_factory import make_record
+
+    from safl_bench.results.records import timed_under_load
+    from safl_bench.run.runner import CellOutcome, summary_table
+
+    base = make_record(seed=0)
+    env = dataclasses.replace(base.environment, cpu_cores=2)
+    idle = dataclasses.replace(base, environment=env,
+                               timings=dataclasses.replace(base.timings, load_avg_1m=1.4))
+    busy = dataclasses.replace(idle, timings=dataclasses.replace(base.timings, load_avg_1m=5.0))
+    assert (timed_under_load(idle), timed_under_load(busy), timed_under_load(base)) == (False, True, None)
+    table = summary_table([CellOutcome(busy.task.id, 0, "computed", Path("x"), busy,
+                                       method="stable_afl", version="1")])
+    assert "(loaded)" in table and "note: (loaded)" in table
+    assert "timed when their record was made" not in table
+    table = summary_table([CellOutcome(idle.task.id, 0, "reused", Path("x"), idle,
+                                       method="stable_afl", version="1")])
+    assert "(loaded)" not in table
+    assert "timed when their record was made (2025-01-01), not now" in table

@@ -33,7 +33,7 @@ from safl_bench.leaderboard.grouping import (
     seed_set,
 )
 from safl_bench.leaderboard.intervals import BEST, TIED
-from safl_bench.results.records import MODES, Metrics, ResultRecord
+from safl_bench.results.records import MODES, Metrics, ResultRecord, timed_under_load
 
 MISSING = "—"
 UNDEFINED = "n/a"
@@ -673,6 +673,7 @@ def time_table(key: TableKey, records: list[ResultRecord], notes: Iterable[str] 
     if len(machines) > 1:
         extra.append("Rows were timed on different machines: compare them with care.")
     extra += _carried_note([r for r in records if on_first_host(r)])
+    extra += _loaded_note([r for r in records if on_first_host(r)])
     mixed: dict[tuple[str, str, tuple[str, ...]], list[str]] = defaultdict(list)
     for (name, version, task), seen in hosts.items():
         if len(seen) > 1:
@@ -721,6 +722,23 @@ def _timing_cell(values: dict[int, float | None]) -> Cell | None:
 
 #: What a record's `timings.how_run` says when it carries the timing of another seed of its cell.
 CARRIED = "measured at seed "
+
+
+def _loaded_note(records: list[ResultRecord]) -> list[str]:
+    """A note on the timings taken under load (`timed_under_load`): how many of the records
+    that say, which cells; [] when none was, and a line on the records that do not say."""
+    said = [r for r in records if timed_under_load(r) is not None]
+    loaded = sorted({f"{r.method.name}@{r.method.version} {r.task.condition or r.task.id}"
+                     for r in said if timed_under_load(r)})
+    out = []
+    if loaded:
+        out.append(f"{len(loaded)} cell(s) were timed while the 1-minute load average exceeded "
+                   f"the host's cores, so other work shared the CPUs and their ms/frame "
+                   f"overstates the method's: {', '.join(loaded)}.")
+    if said and len(said) < len(records):
+        out.append(f"{len(records) - len(said)} of the {len(records)} records predate the "
+                   "load average in records: whether they were timed under load is not known.")
+    return out
 
 
 def _carried_note(records: list[ResultRecord]) -> list[str]:

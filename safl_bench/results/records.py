@@ -328,6 +328,21 @@ class Timings:
     peak_memory_mb: Amount | None
     repeats: Count
     how_run: Text
+    #: the 1-minute load average at the end of the batch-1 timing (None: not measured, as in
+    #: records made before it was kept); above the host's usable cores (`Environment.cpu_cores`)
+    #: other work shared the CPUs while it was timed (`timed_under_load`)
+    load_avg_1m: Amount | None = None
+
+
+def timed_under_load(record: ResultRecord) -> bool | None:
+    """Whether the record's batch-1 timing was taken while more threads wanted the CPUs than
+    the host has usable cores (its 1-minute load average above `Environment.cpu_cores`): then
+    it is slower than the method, by how much is not known. None when the record does not say."""
+    load = record.timings.load_avg_1m
+    cores = record.environment.cpu_cores
+    if load is None or not cores:
+        return None
+    return bool(load > cores)
 
 
 @dataclass(frozen=True)

@@ -70,6 +70,7 @@ from safl_bench.results.records import (
     record_path,
     rescore,
     task_info,
+    timed_under_load,
     write_evaluated,
     write_record,
 )
@@ -388,6 +389,7 @@ def finish_cell(method: Method, options: RunOptions, cell: EvaluatedCell,
         peak_memory_mb=batch1.peak_rss_mb,
         repeats=options.timing_repeats,
         how_run=how_run,
+        load_avg_1m=batch1.env.load_avg_1m,
     )
     return dataclasses.replace(_write(options, cell, timings), timed_here=True)
 
@@ -746,7 +748,7 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
     header = (*lead, "task", "seeds", "matcher", "R@100%P", "F1max", "R@1", "AUC",
               "R@100%P 1-frame", "R@1 1-frame", "ms/frame", "record")
     rows: list[tuple[str, ...]] = []
-    no_interval = any_untrained = False
+    no_interval = any_untrained = loaded = False
     marks: set[str] = set()  # the seen-in-training marks of the rows (`seen_mark`)
     for method, task_id, cell in _cells(outcomes):
         records = [o.record for o in cell if o.record is not None]
@@ -772,6 +774,9 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         ms = sorted(set(r.timings.describe_ms_per_frame for r in records))
         timing = f"{float(np.median(ms)):.2f}" + (f" [{ms[0]:.2f}, {ms[-1]:.2f}]" if len(ms) > 1
                                                   else " (1 timing)" if len(records) > 1 else "")
+        if any(timed_under_load(r) for r in records):
+            timing += " (loaded)"
+            loaded = True
         statuses = [o.status for o in cell]
         status = ", ".join(f"{s} {statuses.count(s)}" if len(statuses) > 1 else s
                            for s in dict.fromkeys(statuses))
@@ -805,6 +810,16 @@ def summary_table(outcomes: Sequence[CellOutcome]) -> str:
         legend += f"; {NO_SEQUENCE}: {NO_SEQUENCE_WHY}; its ms/frame is the method's call per query"
     extra = ["note: some records hold no per-query outcomes (metrics version 1): their cells show "
              "the mean only; `safl-bench run --force` recomputes them"] if no_interval else []
+    if loaded:
+        extra.append("note: (loaded): the cell's batch-1 timing was taken while the 1-minute load "
+                     "average exceeded the machine's cores (other work shared the CPUs), so it "
+                     "overstates the method's time; rerun with --force on an idle machine")
+    old = sorted({o.record.created[:10] for o in outcomes
+                  if o.record is not None and o.status != "computed"})
+    if old:  # a reused record keeps the timing of the run that made it
+        extra.append("note: cells not computed now (reused, rescored, derived) show the ms/frame "
+                     f"timed when their record was made ({', '.join(old)}), not now; "
+                     "`--force` times them again")
     if SEEN_MARK in marks:
         extra.append("note: (seen in training): the method's weights were trained on that task's "
                      "sequence; its scores measure memory, not generalisation")
