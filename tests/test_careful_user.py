@@ -90,3 +90,27 @@ def test_timings_under_load_and_old_timings_are_marked() -> None:
                                        method="stable_afl", version="1")])
     assert "(loaded)" not in table
     assert "timed when their record was made (2025-01-01), not now" in table
+
+
+def test_a_loop_closure_row_without_closures_is_never_bold() -> None:
+    from safl_bench.leaderboard import slam_table
+    from safl_bench.slam.backend import BACKENDS
+    from safl_bench.slam.cell import BackendResult, SlamResult
+
+    def cell(method: str, ate: float, true: int, false: int) -> slam_table.SlamCell:
+        results = tuple(SlamResult(
+            method=method, task="SAFL/X-Revisit-v0", seed=0, settings={"mode": "sequence"},
+            threshold=None if true + false == 0 else 0.5, threshold_rule="deployed on Y",
+            drift={"level": "mid"}, n_poses=100, closures_true=true, closures_false=false,
+            odometry_ate_m=ate, odometry_rpe_m=None, seconds=0.0, record_created="x",
+            backends=[BackendResult(b, True, "", ate + 0.01 * s, None) for b in BACKENDS],
+            slam_seed=s) for s in range(5))
+        return slam_table.SlamCell(method, "SAFL/X-Revisit-v0", "sequence", results)
+
+    # the no-closure row has the lowest ATE (it is the odometry), the others much higher
+    md = slam_table.slam_markdown("t", [cell("none@1", 1.0, 0, 0), cell("a@1", 5.0, 10, 1),
+                                        cell("b@1", 9.0, 10, 9)])
+    assert md is not None
+    row = next(line for line in md.splitlines() if line.startswith("| none@1"))
+    assert "**" not in row and "≈" not in row
+    assert "**5.0" in next(line for line in md.splitlines() if line.startswith("| a@1"))

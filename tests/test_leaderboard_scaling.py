@@ -26,7 +26,7 @@ def test_runs_become_a_table_and_a_figure(tmp_path: Path) -> None:
     (folder / "broken.json").write_text("{")
     (folder / "other.json").write_text(json.dumps({"frames": 3}))
     runs, problems = scaling.load(folder)
-    assert [r["frames"] for r in runs] == [1000, 1000, 100_000]  # candidates sort first
+    assert [r["frames"] for r in runs] == [1000, 100_000, 1000]  # exact first
     assert sorted(p.path.name for p in problems) == ["broken.json", "other.json"]
     assert "no dim, mode, seconds" in str(next(p for p in problems if p.path.name == "other.json"))
     md = scaling.markdown(runs)

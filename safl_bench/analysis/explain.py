@@ -314,10 +314,15 @@ def _matched_by(ex: Explanation) -> str:
 def summary(ex: Explanation) -> str:
     """A few lines for the terminal: the metric, and which wrong matches set it."""
     rec = ex.record
+    correct = int((ex.status == CORRECT).sum())
+    scored = int((ex.status != NOT_SCORED).sum())
+    positive = int(ex.metrics.n_positive)
     lines = [f"{rec.method.name}@{rec.method.version} on {rec.task.id} seed {rec.seed}, "
              f"{_matched_by(ex)}: recall at 100 % precision {_pct(ex.metrics.recall_at_100)} "
-             f"(record: {_pct(ex.recorded_recall)}), {int((ex.status == CORRECT).sum())} of "
-             f"{int((ex.status != NOT_SCORED).sum())} scored queries matched correctly"]
+             f"(record: {_pct(ex.recorded_recall)}); {correct} correct matches: {correct} of the "
+             f"{positive} scored queries with a true place (Recall@1 "
+             f"{_pct(correct / positive if positive else float('nan'))}, the tables' "
+             f"denominator), of {scored} scored queries in all"]
     enhancement = enhancement_line(ex)
     if enhancement:
         lines.append(enhancement)

@@ -22,11 +22,13 @@ TITLE = "Matcher scaling: descriptors to matches, N queries against N database f
 INTRO = ("Each row is one run of `safl-bench bench matcher --n N --dim D --mode MODE --json FILE` "
          "on the 2-core development machine: seeded random descriptors with a planted route "
          "(`safl_bench.bench.matching_bench`). *seconds*: median over the run's repeats; "
-         "*peak MB*: the process's extra resident memory in one more run; *route found*: share "
+         "*peak MB*: the process's extra resident memory during its first run; *route found*: share "
          "of the planted queries matched to their frame +- 1; *same as dense*: the exact mode's "
          "matches, scores and velocities, or the candidate mode's matched frames, against the "
-         "whole-matrix path timed in the same run (n/a where its two N x N matrices do not fit). "
-         "Timings on a shared machine: compare ratios within a run, not across rows.")
+         "whole-matrix path timed in the same run (n/a where its two N x N matrices do not fit); "
+         "half of the queries are new places, whose best sequence need not pass through their K "
+         "nearest frames, so about half of the candidate mode's answers differ there. Timings on "
+         "a shared machine: compare ratios within a run, not across rows.")
 _KEYS = ("frames", "dim", "mode", "seconds", "peak_mb", "route_found", "identical_to_dense")
 
 
@@ -49,7 +51,8 @@ def load(folder: Path) -> tuple[list[dict[str, Any]], list[Problem]]:
             continue
         data["file"] = path.name
         runs.append(data)
-    runs.sort(key=lambda r: (r["mode"], r.get("k") or 0, r["dim"], r["frames"]))
+    runs.sort(key=lambda r: (r["mode"] != "exact", r.get("index") or "", r.get("k") or 0,
+                             r["dim"], r["frames"]))
     return runs, problems
 
 

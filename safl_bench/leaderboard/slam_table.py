@@ -9,7 +9,7 @@ threshold and matches do not depend on it). Only results of the default settings
 RPE over 100 m) count, and a cell counts when it has every one of `DEFAULT_SLAM_SEEDS` seeds.
 Ranks as the other tables mark them: bold the lowest mean of a column beyond the noise (its paired
 difference over the same seeds, `slam.cell.paired_ate_difference`, to every other row excludes 0),
-≈ every row tied with it. The odometry alone (the same for every method of a task) is its own
+≈ every row tied with it; a row with no closure (the odometry alone) is never ranked. The odometry alone (the same for every method of a task) is its own
 row. Compute the result files with `safl-bench slam --deployed` (docs/guides/slam.md).
 """
 
@@ -116,7 +116,11 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
              "sequence named, deployed here (never chosen on the sequence scored). **Bold**: lowest "
              "of its column and matching mode beyond the noise (paired over seeds); ≈: tied for lowest. A "
              "row marked as seen in training (its weights were trained on frames of this task, "
-             "the revisit table's mark) is shown, never ranked.", ""]
+             "the revisit table's mark) is shown, never ranked, and so is a row that accepted no "
+             "closure (it is the odometry alone). *false* counts every accepted closure whose "
+             "match is not a true place, those 3–20 m away included, which the recall tables "
+             "leave out as ambiguous; each false closure enters the graph as a random "
+             "measurement.", ""]
     for task, group in sorted(by_task.items()):
         group.sort(key=lambda c: (c.mode != "sequence", c.method))
         first = group[0].results[0]
@@ -127,7 +131,9 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
                   "|---|---|---:|" + "---:|" * len(BACKENDS)]
         marks: dict[str, dict[int, str]] = {b: {} for b in BACKENDS}
         for mode in {c.mode for c in group}:  # ranked within a matching mode, as the revisit table
-            index = [i for i, c in enumerate(group) if c.mode == mode and not c.seen]
+            # a row that accepted no closure is the odometry alone: shown, never ranked
+            index = [i for i, c in enumerate(group) if c.mode == mode and not c.seen
+                     and c.results[0].closures_true + c.results[0].closures_false > 0]
             for b in BACKENDS:
                 marks[b].update({index[k]: m for k, m in _marks([group[i] for i in index], b).items()})
         odometry = group[0].ate(None)
