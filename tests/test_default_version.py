@@ -193,3 +193,13 @@ def test_untrained_networks_only_when_asked_and_marked_everywhere(versions, tiny
     assert [row[1] for row in table.rows] == ["2", "2", "2 (untrained)", "2 (untrained)"]
     assert f"| {NAME} | 2 (untrained) | sequence |" in table.markdown()
     assert any("'(untrained)'" in note for note in table.notes)
+    # and so do the all-results CSV and the figures: their own PR figure, never merged
+    from safl_bench.leaderboard import build_leaderboard
+    from safl_bench.leaderboard.tables import all_results_frame
+
+    frame = all_results_frame([untrained, trained])
+    assert sorted(set(frame["weights"])) == ["", "untrained"]
+    report = build_leaderboard([untrained, trained], tmp_path / "board", site=False)
+    pngs = sorted(p.name for p in (tmp_path / "board" / "figures").rglob("*-pr-*.png"))
+    assert len(pngs) == 2 and sum("untrained" in p for p in pngs) == 1, pngs
+    assert report.written

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
-from record_factory import SYNTH_LABEL, make_record, scored_record
+from record_factory import SYNTH_LABEL, make_record, scored_record, task_outcomes
 
 from safl_bench.cli import main as cli_main
 from safl_bench.errors import DataError
@@ -361,6 +361,9 @@ def test_cli_reports_corrupt_records_and_rebuilds(tmp_path: Path, capsys) -> Non
     captured = capsys.readouterr()
     assert str(bad) in captured.err and "not valid JSON" in captured.err
     assert "| stable_afl | 1 | sequence | ≈ 90.9 | 58.4 |" in captured.out
+    # a board built away from a checkout names what it leaves out, and why
+    assert f"{out} has no preset-records/ (the tables by matcher preset and Table II)" in captured.err
+    assert "training-logs/ (the training curves)" in captured.err
     index = (out / "index.md").read_text()
     assert "broken@1/SAFL__Synth00-T1R1-v0/seed-0.json" in index
     first = {p: p.read_bytes() for p in out.rglob("*.md")}
@@ -416,7 +419,8 @@ def test_committed_tables_are_regenerated_exactly(tmp_path: Path) -> None:
     selected, _ = load_records(REPO_BOARD / "selected-records")
     report = build_leaderboard(records, tmp_path, figures=False, preset_records=presets,
                                selected_records=selected, table2_variants=variants,
-                               records_folder=lambda record: str(REPO_BOARD / "records"))
+                               records_folder=lambda record: str(REPO_BOARD / "records"),
+                               scaling_dir=REPO_BOARD / "experiments" / "matcher-scaling")
     _committed(tmp_path, ("tables",))
     # the README's generated blocks are what the same records give (`safl-bench leaderboard`)
     from safl_bench.leaderboard.headline import README_LINK, readme_block
@@ -553,3 +557,38 @@ def test_table_ii_readme_block_is_the_papers_layout_with_ours_under_it(tmp_path)
     readme.write_text(f"{table2.README_END}\n{table2.README_START}\n")
     with pytest.raises(DataError, match="Table II markers"):
         replace_block(readme, table2.README_START, table2.README_END, block, "Table II")
+
+
+def test_a_method_that_abstains_is_never_marked_best() -> None:
+    """Answering only where it is sure (a fifth of the places, all right) gives an AUC near 1
+    over its answers; the table shows it but never marks it, and its notes say why."""
+    import dataclasses
+
+    import numpy as np
+
+    from safl_bench import metrics
+    from safl_bench.leaderboard.tables import ANSWERED_MIN
+    from safl_bench.records import mode_result_from_evaluation
+
+    def shy(seed: int) -> ResultRecord:
+        truth = task_outcomes(seed, 0.9)
+        keep = np.zeros(len(truth.confidence), bool)
+        keep[np.flatnonzero(truth.has_true_place)[::5]] = True  # a fifth of the places
+        o = metrics.Outcomes(np.where(keep, 5.0, -np.inf), np.where(keep, 1, -1).astype(np.int8),
+                             truth.has_true_place, truth.has_candidate, truth.true_rank)
+        assert metrics.answered_share(o) is not None and metrics.answered_share(o) < ANSWERED_MIN
+        mode = mode_result_from_evaluation(metrics.evaluate_outcomes(o), o)
+        return dataclasses.replace(make_record("shy", seed=seed), results={"sequence": mode,
+                                                                           "single_frame": mode})
+
+    records = [shy(s) for s in range(3)] + [scored_record(m, seed=s, skill=k) for s in range(3)
+                                            for m, k in (("busy", 0.95), ("weak", 0.3))]
+    table = _table(records, auc_table)
+    (col,) = [j for j, c in enumerate(table.columns) if c == "T1R1"]
+    shy_row = table.rows.index(("shy", "1", "sequence"))
+    busy_row = table.rows.index(("busy", "1", "sequence"))
+    cell = table.cells[shy_row][col]
+    assert cell is not None and cell.mean is not None and cell.mean > 0.99  # its AUC: near 1
+    assert (shy_row, col) not in table.marks and table.marks.get((busy_row, col)) in ("best", "tied")
+    assert any("answered fewer than 50% of the queries with a true place" in n and "shy v1 sequence answered 20%" in n
+               for n in table.notes)

@@ -116,7 +116,8 @@ def test_cli_run_prints_the_table(tiny_tasks, kitti_root, tmp_path, capsys):
     assert record["matcher"]["enhancement"]["window"] >= 2
 
 
-def test_cli_run_matcher_settings_are_used_and_recorded(tiny_tasks, kitti_root, tmp_path, capsys):
+def test_cli_run_matcher_settings_are_used_and_recorded(tiny_tasks, kitti_root, tmp_path, capsys,
+                                                         monkeypatch):
     rc = main(["run", "--method", "sad", "--task", tiny_tasks[0], "--kitti-root", str(kitti_root),
                "--results", str(tmp_path), "--quiet", "--matcher", "enhance_window=0", "--matcher", "ds=3",
                "--score", "ratio"])
@@ -125,6 +126,8 @@ def test_cli_run_matcher_settings_are_used_and_recorded(tiny_tasks, kitti_root, 
     seq = record["matcher"]["sequence"]
     assert (seq["enhance_window"], seq["ds"], seq["score"]) == (0, 3, "ratio")
     assert record["matcher"]["single_frame"]["score"] == "ratio"
+    # a bad setting is named before the missing data folder is (no --kitti-root, no env)
+    monkeypatch.delenv("SAFL_KITTI_ROOT", raising=False)
     assert main(["run", "--method", "sad", "--task", tiny_tasks[0], "--matcher", "speed=2"]) == 2
     assert "--matcher: unknown setting(s) ['speed']" in capsys.readouterr().err
 

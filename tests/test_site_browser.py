@@ -95,6 +95,20 @@ def test_sort_filter_and_detail_in_chromium(tmp_path: Path) -> None:
 
         page.click("#f-reset")
         assert len(_visible_rows(head)) == 6
+        # one sequence's columns at a time by default: the table fits the 1400 px page
+        picker = head.locator("select.colgroup")
+        assert picker.input_value() == "00"
+        fits = "s => s.scrollWidth <= s.clientWidth + 1"
+        assert head.locator(".scroll").evaluate(fits)
+        shown = "ths => ths.filter(t => t.offsetParent !== null).map(t => t.textContent)"
+        visible = head.locator("thead th").evaluate_all(shown)
+        assert "00 F1max" in visible and not any(t.startswith("02 ") for t in visible)
+        picker.select_option("02")
+        visible = head.locator("thead th").evaluate_all(shown)
+        assert "02 F1max" in visible and "00 F1max" not in visible
+        picker.select_option("")
+        assert len(head.locator("thead th").evaluate_all(shown)) == len(header)
+        picker.select_option("00")
         page.screenshot(path=str(shots / "screenshot-headline.png"), full_page=True)
 
         figure = next((out / "figures").rglob("revisit-v0-pr.png"))

@@ -30,6 +30,15 @@ from safl_bench.results.records import Problem, ResultRecord, load_records
 
 SELECTED_RECORDS = "selected-records"
 TABLE2_VARIANTS = "experiments/table2"
+#: The folders of OUT (besides the records) that parts of the board are built from, and those
+#: parts: a board built where one is missing names it (`main`).
+BOARD_INPUTS: tuple[tuple[str, str], ...] = (
+    ("preset-records", "the tables by matcher preset and Table II"),
+    (SELECTED_RECORDS, "Table II's rows of checkpoints selected on the test set"),
+    (TABLE2_VARIANTS, "Table II's variants"),
+    ("experiments/matcher-scaling", "the matcher's speed page"),
+    ("training-logs", "the training curves"),
+)
 
 HELP = "regenerate the leaderboard (Markdown/CSV tables, PNG figures, web pages) from result records"
 
@@ -162,6 +171,12 @@ def main(args: argparse.Namespace) -> int:
         f"leaderboard: {len(records)} records from {results} -> {out} "
         f"({len(report.written)} files written, {len(report.removed)} stale files removed)"
     )
+    absent = [f"{folder}/ ({what})" for folder, what in BOARD_INPUTS
+              if not (logs if folder == "training-logs" else out / folder).is_dir()]
+    if absent:  # a board built elsewhere (--out) says what it leaves out, never silently
+        print(f"safl-bench: note: {out} has no {'; no '.join(absent)}: this board leaves them "
+              "out; copy those folders from a checkout's leaderboard/ to include them",
+              file=sys.stderr)
     if report.headline is not None:
         print()
         print(report.headline.markdown(level=3), end="")

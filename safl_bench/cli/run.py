@@ -160,14 +160,17 @@ def main(args: argparse.Namespace) -> int:
     by_source: dict[str, list[str]] = {}
     for task_id in task_ids:
         by_source.setdefault(spec(task_id).source, []).append(task_id)
+    seeds = distinct_seeds(args.seed) if args.seed else None
+    evaluation = matcher_config(args.score, args.matcher, args.matcher_preset)
     from safl_bench.sources import missing_data
 
+    # options are checked first (a typo is named whatever the data), then the data folders,
+    # before any work rather than per cell after start-up
     missing = [m for m in (missing_data(spec(t), kitti_root=args.kitti_root, bev_root=args.bev_root,
                                         bev_rot_root=args.bev_rot_root) for t in task_ids) if m]
-    if missing:  # before any work, not per cell after start-up
+    if missing:
         more = f" (and {len(missing) - 1} more tasks)" if len(missing) > 1 else ""
         raise ConfigError(missing[0] + more)
-    seeds = distinct_seeds(args.seed) if args.seed else None
     options = RunOptions(
         results_dir=Path(args.results) if args.results else default_results_dir(),
         force=args.force,
@@ -175,7 +178,7 @@ def main(args: argparse.Namespace) -> int:
         bev_root=args.bev_root,
         bev_rot_root=args.bev_rot_root,
         bev_resolution_m=args.bev_resolution,
-        evaluation=matcher_config(args.score, args.matcher, args.matcher_preset),
+        evaluation=evaluation,
         progress=not args.quiet,
     )
     parallel = parallel_from(args)

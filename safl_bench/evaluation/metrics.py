@@ -85,6 +85,21 @@ wrong match in a hundred accepted is allowed, and the recall is over the correct
 method that answers a query wrongly loses nothing by it). Named apart so that nobody reads one
 for the other; tables show both.
 
+Abstaining. A method may report no match for a query (a retrieval method whose verification
+rejects every candidate: MapClosures answers about one query in six on KITTI 00's revisit task).
+The recalls and F1 above count such a query with a true place against it (denominator P), so
+answering less never raises them. ``auc`` does not: it asks whether the method's confidence
+separates its correct answers from everything else, and a method that answers only where it is
+sure, and is always right there, separates them perfectly (AUC 1 at a recall of 16 %). That is
+the selective-prediction view, where a measure of how well answers are ranked is read beside
+the COVERAGE, never alone (Geifman and El-Yaniv, "Selective classification for deep neural
+networks", NeurIPS 2017, risk-coverage curves; El-Yaniv and Wiener, JMLR 2010). So the measures
+keep their definitions (no version change: every stored value stays what it was) and
+`answered_share` gives the coverage: of the scored queries with a true place, the share for
+which the method reported a match. The leaderboard never marks a cell best or tied
+(`safl_bench.leaderboard.tables.ANSWERED_MIN`) whose method answered fewer than half of them,
+and its notes say which rows and why.
+
 ``METRICS_VERSION`` is stored in every record: version 1 (records without it) divided recall by
 the queries with a true place whose match was not ambiguous (so P depended on the method) and
 counted queries without a candidate in the AUC; it had no ``_of_correct`` measures. Version 2
@@ -386,6 +401,16 @@ def evaluate_outcomes(
 
 
 # --------------------------------------------------------------------------- retrieval ranks
+
+
+def answered_share(outcomes: Outcomes) -> float | None:
+    """Coverage (module docstring, "Abstaining"): of the scored queries with a true place, the
+    share that reported a match (right or wrong); None when there is no such query."""
+    positives = np.asarray(outcomes.has_true_place, bool) & np.asarray(outcomes.has_candidate, bool)
+    if not positives.any():
+        return None
+    answered = np.asarray(outcomes.confidence, np.float64) > -np.inf  # -inf: reported none
+    return float(answered[positives].mean())
 
 
 def true_place_ranks(

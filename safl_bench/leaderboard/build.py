@@ -51,6 +51,7 @@ from safl_bench.leaderboard.tables import (
     recall_at_1_table,
     recall_table,
     revisit_table,
+    shown_version,
     time_table,
 )
 from safl_bench.leaderboard.training_logs import TrainingLog, load_training_logs
@@ -127,6 +128,7 @@ def build_leaderboard(
     table2_variants: Sequence[table2.Variant] = (),
     site: bool = True,
     records_folder: Callable[[ResultRecord], str] | None = None,
+    scaling_dir: str | os.PathLike[str] | None = None,
 ) -> BuildReport:
     """Write the leaderboard for `records` into `out_dir` (see the module docstring).
 
@@ -136,7 +138,8 @@ def build_leaderboard(
     its preset); each paper-protocol table of the top-view images gains a table by preset.
     `site`: also write the web pages (`safl_bench.leaderboard.site`; `records_folder(record)`
     names the folder each record was read from, for their provenance; by default the
-    committed layout, leaderboard/records and leaderboard/preset-records/<preset>). Raises DataError when
+    committed layout, leaderboard/records and leaderboard/preset-records/<preset>). `scaling_dir`:
+the matcher's scaling runs (default `out_dir`/experiments/matcher-scaling). Raises DataError when
     there are no records, so an empty results directory never wipes a leaderboard.
     """
     if not records:
@@ -208,7 +211,7 @@ def build_leaderboard(
                 )
                 by_method: dict[tuple[str, str], list[ResultRecord]] = defaultdict(list)
                 for record in group:
-                    by_method[(record.method.name, record.method.version)].append(record)
+                    by_method[(record.method.name, shown_version(record))].append(record)
                 for (name, version), recs in sorted(by_method.items()):
                     rel = f"figures/{base}-pr-{slugify(name)}-v{slugify(version)}.png"
                     entry.figures.append(
@@ -271,7 +274,8 @@ def build_leaderboard(
 
     from safl_bench.leaderboard import scaling
 
-    runs, scaling_problems = scaling.load(out / scaling.FOLDER)
+    runs, scaling_problems = scaling.load(Path(scaling_dir) if scaling_dir is not None
+                                          else out / scaling.FOLDER)
     report.problems.extend(scaling_problems)
     if runs:
         report.scaling = runs

@@ -24,7 +24,7 @@ from safl_bench.common.atomic import atomic_write_with
 from safl_bench.errors import ConfigError
 from safl_bench.leaderboard.grouping import Cell, TableKey, condition_order, format_seeds
 from safl_bench.leaderboard.intervals import BEST
-from safl_bench.leaderboard.tables import MISSING, MODE_LABELS, Table
+from safl_bench.leaderboard.tables import MISSING, MODE_LABELS, Table, shown_version
 from safl_bench.leaderboard.training_logs import TrainingLog
 from safl_bench.results.records import MODES, ResultRecord
 from safl_bench.views.noise import Condition
@@ -162,7 +162,7 @@ def revisit_pr_figure(key: TableKey, records: Sequence[ResultRecord], path: Path
     with matplotlib.style.context("default"):
         fig = _new_figure(4.4 * len(sequences), 4.0 * len(modes) + 0.4)
         axes = fig.subplots(len(modes), len(sequences), squeeze=False)
-        methods = sorted({(r.method.name, r.method.version) for r in records})
+        methods = sorted({(r.method.name, shown_version(r)) for r in records})
         colors = matplotlib.colormaps["tab10"]
         n_seeds = len({r.seed for r in records})
         for a, mode in enumerate(modes):
@@ -172,7 +172,7 @@ def revisit_pr_figure(key: TableKey, records: Sequence[ResultRecord], path: Path
                 for record in sorted(
                     records, key=lambda r: (r.method.name, r.method.version, r.seed)
                 ):
-                    who = (record.method.name, record.method.version)
+                    who = (record.method.name, shown_version(record))
                     if record.task.sequence != sequence or mode not in record.results:
                         continue
                     pr = record.results[mode].curves.pr

@@ -12,6 +12,10 @@ tables share it). Ranks:
   not exclude 0; also when a difference cannot be computed (records without per-query
   outcomes, metrics version 1), since then nothing says the order is beyond the noise.
 
+Which cells are ranked at all is the tables' rule (`safl_bench.leaderboard.tables`): not rows
+seen in training, and not cells whose method answered fewer than half of the queries with a
+true place (`tables.ANSWERED_MIN`).
+
 With one seed the interval is over the queries alone (a fixed split, or a cell run once).
 """
 

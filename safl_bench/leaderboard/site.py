@@ -48,6 +48,8 @@ INDEX = "index.html"
 ALL = "all.html"
 RANKING = "ranking.html"
 SCALING = "speed.html"
+#: The anchor of a page's loop-closure section (its navigation entry links to it).
+SLAM_ID = "loop-closure"
 #: The image-fidelity figure `safl-bench data fidelity --out` writes beside the board (it needs
 #: real KITTI's images, so the build shows it when it is there and never draws it).
 FIDELITY_PNG = "fidelity/fidelity.png"
@@ -141,6 +143,15 @@ def write_site(
     nav = [(INDEX, "Headline"), *((p.file, p.title) for p in pages), (ALL, "All tables")]
     if report.ranking:
         nav.insert(1, (RANKING, "Synthetic vs real KITTI"))
+    # the sections a reader looks for by name get their own entries, before "All tables"
+    for page in pages:
+        if page.key is not None and page.key in report.table2:
+            nav.insert(len(nav) - 1, (f"{page.file}#table2-{slugify(page.key.stem)}",
+                                      f"Table II ({page.key.source_label})"))
+    for page in pages:
+        if page.key is not None and _slam_section(out, page.key):
+            nav.insert(len(nav) - 1, (f"{page.file}#{SLAM_ID}",
+                                      f"Loop closure in SLAM ({page.key.source_label})"))
     if report.scaling:
         nav.insert(len(nav) - 1, (SCALING, "Matcher speed"))
     skipped = [_problem_line(p, problem_base) for p in problems]
@@ -221,8 +232,11 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
     provenance = _provenance(published)
     marks = table.marks
     show = [(i, h) for i, h in enumerate(table.row_header) if h]
+    groups = column_groups(table.columns)
     head = "".join(f'<th data-type="text" scope="col">{_e(h)}</th>' for _, h in show)
-    head += "".join(f'<th data-type="num" scope="col">{_e(c)}</th>' for c in table.columns)
+    head += "".join(f'<th data-type="num" scope="col"{_group_attr(g)}>{_e(c)}</th>'
+                    for c, g in zip(table.columns, groups or [""] * len(table.columns),
+                                    strict=True))
     rows = []
     for i, row in enumerate(table.rows):
         recs = [r for j in range(len(table.columns)) for r, _ in provenance.get((row, j), [])]
@@ -252,7 +266,7 @@ def _table_section(published: PublishedTable, out: Path, registry: _Registry, *,
         f"<section {_attrs(section_attrs)}>"
         f"<h2>{_e(table.heading)}</h2>"
         f'<p class="meta">{_e(seeds_sentence(table).replace("**Bold**", "Bold"))} · {md_link} · '
-        f'<a href="../{_e(csv)}">CSV</a></p>'
+        f'<a href="../{_e(csv)}">CSV</a>{_group_picker(groups)}</p>'
         f'<div class="body"><div class="scroll"><table class="sortable">'
         f"<thead><tr>{head}</tr></thead><tbody>{''.join(rows)}</tbody></table></div>{beside}</div>"
         f'<p class="shown" aria-live="polite"></p>'
@@ -394,6 +408,29 @@ def _preset(record: ResultRecord) -> str:
     return label(record.matcher)
 
 
+def column_groups(columns: Sequence[str]) -> list[str]:
+    """The sequence each column belongs to ("00 F1max" -> "00"), when a table's columns come in
+    two or more such groups (a table over several sequences, wider than a page); else []."""
+    heads = [c.split(" ", 1)[0] for c in columns]
+    if not heads or not all(h.isdigit() and " " in c for h, c in zip(heads, columns, strict=True)):
+        return []
+    return heads if len(set(heads)) > 1 else []
+
+
+def _group_attr(group: str) -> str:
+    return f' data-group="{_e(group)}"' if group else ""
+
+
+def _group_picker(groups: Sequence[str]) -> str:
+    """The 'Sequence' picker of a table whose columns come in groups: one group at a time (the
+    first by default, so the table fits the page), or all of them."""
+    if not groups:
+        return ""
+    options = "".join(f'<option value="{_e(g)}">{_e(g)}</option>' for g in dict.fromkeys(groups))
+    return (f' · <label>Sequence <select class="colgroup">{options}'
+            '<option value="">all (wide)</option></select></label>')
+
+
 def _table_id(published: PublishedTable) -> str:
     return slugify(published.md.removeprefix("tables/").removesuffix(".md"))
 
@@ -419,7 +456,8 @@ def _problem_line(problem: Problem, base: str | os.PathLike[str] | None) -> str:
 def _document(title: str, name: str, nav: list[tuple[str, str]], skipped: list[str], body: str,
               tables: list[PublishedTable], registry: _Registry) -> str:
     current = ' aria-current="page" class="current"'
-    links = "".join(f'<a href="{_e(f)}"{current if f == name else ""}>{_e(t)}</a>' for f, t in nav)
+    links = "".join(f'<a href="{_e(f)}"{current if f == name else ""}'
+                    f'{_anchor_attr(f)}>{_e(t)}</a>' for f, t in nav)
     sources = sorted({t.key.source_label for t in tables})
     protocols = sorted({t.key.protocol for t in tables})
     methods = sorted({row[0] for t in tables for row in t.table.rows})
@@ -450,6 +488,11 @@ def _document(title: str, name: str, nav: list[tuple[str, str]], skipped: list[s
         "A cell's records: hover or click it.</footer>"
         f"{registry.script()}<script>{_JS}</script></body></html>\n"
     )
+
+
+def _anchor_attr(href: str) -> str:
+    """A navigation link to a section keeps its anchor when the filters rewrite the links."""
+    return f' data-anchor="#{_e(href.split("#", 1)[1])}"' if "#" in href else ""
 
 
 def _select(name: str, label: str, values: list[str]) -> str:
@@ -508,7 +551,8 @@ def _slam_section(out: Path, key: TableKey | None) -> str:
         return ""
     from safl_bench.leaderboard.slam_table import slam_html
 
-    return slam_html(path.read_text(encoding="utf-8"))
+    body = slam_html(path.read_text(encoding="utf-8"))
+    return f'<section class="slam" id="{SLAM_ID}">{body}</section>'
 
 
 def _e(text: object) -> str:
@@ -533,7 +577,7 @@ main{padding:0 1.2rem 2rem}h1{font-size:1.35rem;margin:1rem 0 .6rem}h2{font-size
 .reading{max-width:70rem;border-left:4px solid var(--accent);padding:.4rem .8rem;background:#f0f6ff;margin:.6rem 0}
 .filters{display:flex;flex-wrap:wrap;gap:.5rem 1rem;align-items:center;padding:.6rem 1.2rem;border-bottom:1px solid var(--line);background:var(--head);position:sticky;top:0;z-index:2}
 .filters select{font:inherit;padding:.1rem .3rem}.meta{color:var(--muted);margin:.1rem 0 .4rem}
-.body{display:flex;flex-wrap:wrap;gap:1rem;align-items:flex-start}.scroll{overflow-x:auto;max-width:100%}
+.body{display:flex;flex-direction:column;gap:1rem;align-items:flex-start}.scroll{overflow-x:auto;max-width:100%}
 table{border-collapse:collapse;font-variant-numeric:tabular-nums}th,td{border:1px solid var(--line);padding:.2rem .5rem;white-space:nowrap}
 th{background:var(--head);cursor:pointer;user-select:none;position:relative}th[data-type=num],td.cell{text-align:right}
 th[aria-sort=ascending]::after{content:" ▲";font-size:.7em}th[aria-sort=descending]::after{content:" ▼";font-size:.7em}
@@ -543,7 +587,8 @@ td.outside{color:var(--bad);font-weight:600}.table2 th{cursor:default}
 .t2grid td,.t2grid th{padding:.15rem .35rem}.t2grid td.num{text-align:right}.t2grid td.who{white-space:normal;min-width:9rem;max-width:15rem;font-size:.78rem}
 .t2grid tr.paper td{background:var(--head);font-weight:600}.t2grid tbody th{text-align:left;vertical-align:top;white-space:normal;max-width:8rem}
 .notes{color:var(--muted);font-size:.8rem;max-width:80rem;overflow-wrap:anywhere}.shown{color:var(--muted);font-size:.8rem;margin:.2rem 0}
-.figures{display:flex;flex-wrap:wrap;gap:.6rem}figure{margin:0;max-width:420px}figure img{max-width:100%;border:1px solid var(--line)}
+.figures{display:flex;flex-wrap:wrap;gap:.8rem}figure{margin:0;max-width:min(640px,100%)}figure img{max-width:100%;border:1px solid var(--line)}
+th[hidden],td[hidden]{display:none}
 figcaption{font-size:.78rem;color:var(--muted)}.placeholder{width:320px;height:200px;display:flex;align-items:center;justify-content:center;text-align:center;padding:1rem;border:2px dashed var(--bad);color:var(--bad);background:#fff5f5}
 .problems{margin:.6rem 1.2rem;padding:.5rem .8rem;border:1px solid var(--bad);border-radius:6px;color:var(--bad);background:#fff5f5}
 dialog{max-width:min(60rem,95vw);border:1px solid var(--line);border-radius:8px;padding:1rem 1.2rem}dialog .close{float:right;font-size:1.2rem;border:0;background:none;cursor:pointer}
@@ -574,7 +619,7 @@ _JS = r"""
     var parts = Object.keys(s).sort().map(function(k){ return k + "=" + encodeURIComponent(s[k]); });
     var hash = parts.length ? "#" + parts.join("&") : "";
     if (location.hash !== hash) history.replaceState(null, "", hash || location.pathname);
-    document.querySelectorAll("header nav a").forEach(function(a){ a.href = a.getAttribute("href").split("#")[0] + hash; });
+    document.querySelectorAll("header nav a").forEach(function(a){ a.href = a.getAttribute("href").split("#")[0] + (a.dataset.anchor || hash); });
   }
   function load(){
     var s = {};
@@ -613,6 +658,18 @@ _JS = r"""
           }).forEach(function(o){ body.appendChild(o.tr); });
       });
     });
+  });
+
+  document.querySelectorAll("select.colgroup").forEach(function(sel){
+    var table = sel.closest("section").querySelector("table.sortable");
+    var groups = Array.prototype.map.call(table.querySelectorAll("thead th"), function(th){ return th.dataset.group || ""; });
+    function pick(){
+      var g = sel.value;
+      Array.prototype.forEach.call(table.rows, function(tr){
+        Array.prototype.forEach.call(tr.cells, function(c, j){ c.hidden = !!(g && groups[j] && groups[j] !== g); });
+      });
+    }
+    sel.addEventListener("change", pick); pick();
   });
 
   var dialog = document.getElementById("detail"), dbody = document.getElementById("detail-body");

@@ -58,6 +58,10 @@ PUBLISHED: dict[str, dict[str, float]] = {
 
 #: The paper's names of the methods, in its row order.
 PAPER_NAMES = {"sad": "SAD", "bigan": "BiGAN", "stable_afl": "Stable-ALI (stable_afl)"}
+#: Where the row name "Stable-ALI" comes from (the paper's Table II, and its text on Figure 13;
+#: its title, abstract and Figure 12 say Stable-AFL).
+PAPER_NAME_NOTE = ("\"Stable-ALI\" is the paper's own name for its method in Table II (and in its "
+                   "text on Figure 13; its title and Figure 12 say Stable-AFL): here `stable_afl`.")
 
 #: The matcher preset each method's row is read under (the authors' paper-era code).
 PRESET_OF = {"sad": "authors-sad", "bigan": "authors", "stable_afl": "authors"}
@@ -308,7 +312,7 @@ INTRO = ("Real KITTI 00 top views (`bev-paper`), the authors' paper-era presets:
          "exactly 100 % precision over every query with a true place) and the authors' "
          "reading (recall over the correctly matched queries at the first precision >= "
          "0.99, `authors_recall_at_99p`). Table II does not say which it reports; the "
-         "authors' code reads the second.")
+         "authors' code reads the second. " + PAPER_NAME_NOTE)
 
 
 def header() -> list[str]:
@@ -399,7 +403,7 @@ def readme_block(rows: Sequence[Row], table: str) -> str:
         "Table II (the paper's recall at 100 % precision) beside ours on real KITTI 00 top views "
         "under the authors' paper-era presets (`authors`; SAD `authors-sad`), sequence matching: "
         "mean over seeds [95 % interval over seeds and queries], recall over every query with a "
-        "true place. ✗: the paper's value lies outside our interval.",
+        "true place. ✗: the paper's value lies outside our interval. " + PAPER_NAME_NOTE,
         "",
         grid(rows).rstrip("\n"),
         "",

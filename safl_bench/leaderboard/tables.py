@@ -229,6 +229,42 @@ SEEN_MARK = " (seen in training)"
 PARTLY_SEEN_MARK = " (partly seen in training)"
 #: Appended to the version of a row whose records ran the untrained (random) networks.
 UNTRAINED_MARK = " (untrained)"
+#: A cell is never marked best or tied when its method answered fewer than this share of the
+#: scored queries with a true place (`safl_bench.evaluation.metrics.answered_share`, the
+#: "Abstaining" section there): a measure over its answers alone (the AUC) would rank a method
+#: that abstains above ones that answer. Half: a method that leaves most of the places it
+#: should find unanswered is not the best at finding them, whatever its answers' ranking.
+ANSWERED_MIN = 0.5
+
+
+def shown_version(record: ResultRecord) -> str:
+    """The record's method version as the figures and their files name it: with
+    `UNTRAINED_MARK` when it ran untrained networks, so they never merge with trained ones."""
+    from safl_bench.methods.training_data import record_untrained
+
+    return record.method.version + (UNTRAINED_MARK if record_untrained(record) else "")
+
+
+def _row_label(row: RowKey) -> str:
+    """A row as the notes name it: method, version, matching mode."""
+    return " ".join(part for part in (row[0], f"v{row[1]}", MODE_LABELS.get(row[2], row[2])) if part)
+
+
+def _answered(records: list[ResultRecord], mode: str) -> float | None:
+    """The mean over `records` (a cell's seeds) of the share of queries with a true place that
+    reported a match in `mode`; None when a record holds no per-query outcomes."""
+    from safl_bench.evaluation.metrics import answered_share
+
+    shares = []
+    for record in records:
+        result = record.results.get(mode)
+        if result is None or result.queries is None:
+            return None
+        share = answered_share(result.queries.outcomes())
+        if share is None:
+            return None
+        shares.append(share)
+    return float(np.mean(shares)) if shares else None
 
 
 class Value(NamedTuple):
@@ -313,6 +349,7 @@ def _build(
             line.append(cell)
         cells.append(line)
     marks: dict[tuple[int, int], str] = {}
+    abstaining: dict[RowKey, float] = {}  # row -> the lowest answered share of its cells
     if with_intervals and bootstrapped:
         for j, (column, fmt) in enumerate(zip(columns, formats, strict=True)):
             if fmt.better is None:
@@ -323,6 +360,10 @@ def _build(
                 if cell is None or cell.mean is None or row in seen_rows:
                     continue  # a cell seen in training is never ranked beside clean ones
                 mode, measure = probe[(row, column)]
+                share = _answered(list(sources[(row, column)].values()), mode)
+                if share is not None and share < ANSWERED_MIN:
+                    abstaining[row] = min(share, abstaining.get(row, share))
+                    continue  # it abstained: its measures over its answers are not ranked
                 groups[row[2]].append(intervals.Ranked(
                     i, cell.mean, float(fmt.number(cell.mean)),
                     tuple(sources[(row, column)].values()), mode, measure))
@@ -341,11 +382,8 @@ def _build(
         all_notes.append(f"{', '.join(retrieval)}: sequence matcher n/a (a retrieval method gives "
                          "ranked candidates, no difference matrix): single-frame rows only.")
     for (row, theirs), cols in sorted(own.items(), key=lambda kv: (_row_sort_key(kv[0][0]), kv[0][1])):
-        label = " ".join(
-            part for part in (row[0], f"v{row[1]}", MODE_LABELS.get(row[2], row[2])) if part
-        )
         all_notes.append(
-            f"{label}: {', '.join(cols)} over seed(s) {format_seeds(theirs)} only (the table's: "
+            f"{_row_label(row)}: {', '.join(cols)} over seed(s) {format_seeds(theirs)} only (the table's: "
             f"{format_seeds(seeds)}); {fewer_seeds}"
         )
     if with_intervals and bootstrapped and any(
@@ -370,6 +408,13 @@ def _build(
         all_notes.append(f"Rows whose version says '{UNTRAINED_MARK.strip()}': scored with the "
                          "method's untrained (random) networks (`--weights untrained`), not "
                          "trained weights.")
+    if abstaining:
+        all_notes.append(
+            "Never marked best or tied, as they answered fewer than "
+            f"{ANSWERED_MIN:.0%} of the queries with a true place (the rest they reported no "
+            "match for; the AUC counts only their answers): " + "; ".join(
+                f"{_row_label(row)} answered {share:.0%}" for row, share in sorted(
+                    abstaining.items(), key=lambda kv: _row_sort_key(kv[0]))) + ".")
     all_notes.extend(_matcher_notes(records))
     return Table(
         title=title,
@@ -422,11 +467,9 @@ def _matcher_notes(records: list[ResultRecord]) -> list[str]:
 
     configs = sorted({json.dumps(_settings(r.matcher), sort_keys=True) for r in records})
     labels = sorted({label(r.matcher) for r in records})
-    if len(configs) == 1:
-        settings = ", ".join(
-            f"{k}={json.dumps(v)}" for k, v in sorted(json.loads(configs[0]).items())
-        )
-        return [f"Matcher preset (all rows): {labels[0]}; settings: {settings or 'defaults'}."]
+    if len(configs) == 1:  # the label names the preset and what was changed on top of it
+        return [f"Matcher preset (all rows): {labels[0]}; its every setting, with where each "
+                f"comes from: `safl-bench list matchers` (the records hold them too)."]
     return [
         f"Matcher settings differ between records ({len(configs)} configurations: "
         f"{', '.join(labels)}); see all-results.csv before comparing rows."
@@ -906,6 +949,9 @@ def all_results_frame(records: Iterable[ResultRecord]) -> pd.DataFrame:
                     "n_scored": UNDEFINED if m.n_scored is None else m.n_scored,
                     "n_positives": m.n_positives,
                     "n_correct": UNDEFINED if m.n_correct is None else m.n_correct,
+                    # of the scored queries with a true place, the share it answered (None:
+                    # no per-query outcomes); the board never ranks a cell under ANSWERED_MIN
+                    "answered_share": _num(_answered([r], mode), 4),
                     "metrics_version": r.metrics_version,
                     "describe_ms_per_frame": _num(r.timings.describe_ms_per_frame, 3),
                     "describe_frames_per_s": _num(r.timings.describe_frames_per_s, 1),
