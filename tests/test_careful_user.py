@@ -58,6 +58,25 @@ def test_a_long_describe_prints_lines_in_a_log(monkeypatch: pytest.MonkeyPatch) 
     assert lines == ["  SAFL/X frames: 50 of 100 described (50 %)"]
 
 
+def test_a_long_step_that_reports_nothing_still_prints_lines_in_a_log() -> None:
+    """Building views (or generating the synthetic data) says nothing itself; in a log the
+    runner's heartbeat prints a line while it lasts, and stops with it."""
+    import threading
+    import time
+
+    from safl_bench.common.progress import heartbeat
+
+    lines: list[str] = []
+    with heartbeat(lines.append, "preparing the views", every_s=0.02):
+        time.sleep(0.3)
+    said = len(lines)
+    assert said >= 2 and all(line.startswith("  preparing the views: still working (") for line in lines)
+    time.sleep(0.08)
+    assert len(lines) == said and not [t for t in threading.enumerate() if t.name == "safl-heartbeat"]
+    with heartbeat(None, "nothing", every_s=0.01):  # no log: no thread, no line
+        time.sleep(0.03)
+
+
 def test_train_resolves_a_bare_name_as_run_does(capsys: pytest.CaptureFixture[str]) -> None:
     from safl_bench.methods.method import resolve_method
 

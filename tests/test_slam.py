@@ -403,6 +403,13 @@ def test_run_slam_then_the_leaderboard_table_and_pictures(
     assert [(c.method, c.mode, len(c.results)) for c in cells] == [("sad@1", "sequence", 5)]
     md = slam_table.slam_markdown("tiny", cells)
     assert md is not None and "| odometry alone |" in md and "| sad@1 | sequence |" in md
+    # the row says how many of its false closures lie in the 3-20 m band the recall leaves out
+    first = cells[0].results[0]
+    o = records[0].results["sequence"].queries.outcomes()  # type: ignore[union-attr]
+    band = 0 if first.threshold is None else int(
+        ((o.match >= 0) & (o.confidence >= first.threshold) & (o.label == 0)).sum())
+    assert cells[0].band == band
+    assert (f"{first.closures_false} ({band} in 3–20 m)" in md) == (first.closures_false > 0)
     assert json.loads(slam_table.slam_json(cells))[0]["ate_least-squares"][0] == pytest.approx(
         np.mean(cells[0].ate("least-squares")))
     # other settings never enter the table

@@ -13,7 +13,9 @@ only make sense there; a log file or CI gets plain lines instead (`safl_bench.ru
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import threading
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import Any, Protocol
@@ -53,6 +55,30 @@ def advance(n: int) -> None:
     progress = _current.get()
     if progress is not None:
         progress.advance(n)
+
+
+@contextmanager
+def heartbeat(say: Callable[[str], None] | None, what: str, every_s: float = 30.0) -> Iterator[None]:
+    """While the block runs, `say` "<what>: still working (N s)" every `every_s` seconds, so a
+    log never falls silent through a long step that reports nothing itself (building views,
+    generating the synthetic data); None: nothing is said. A daemon thread, stopped on exit."""
+    if say is None:
+        yield
+        return
+    stop = threading.Event()
+    start = time.monotonic()
+
+    def beat() -> None:
+        while not stop.wait(every_s):
+            say(f"  {what}: still working ({time.monotonic() - start:.0f} s)")
+
+    thread = threading.Thread(target=beat, name="safl-heartbeat", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
 
 
 def interactive(stream: Any) -> bool:

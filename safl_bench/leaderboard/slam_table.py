@@ -30,6 +30,7 @@ from safl_bench.slam.cell import (
     DEFAULT_RPE_DELTA_M,
     DEFAULT_SLAM_SEEDS,
     SlamResult,
+    band_closures,
     paired_ate_difference,
     read_result,
     seed_interval,
@@ -50,6 +51,9 @@ class SlamCell:
     #: the record's training mark (`training_data.seen_mark`: weights trained on this task's
     #: frames); such rows are shown, never ranked, as in the revisit table
     seen: str = ""
+    #: of its false closures, those in the protocol's 3-20 m band (`slam.cell.band_closures`;
+    #: None: the record holds no per-query matches)
+    band: int | None = None
 
     def ate(self, backend: str | None) -> list[float]:
         return [r.ate(backend) for r in self.results]
@@ -73,9 +77,10 @@ def load_cells(records: Sequence[ResultRecord], folder: Path) -> list[SlamCell]:
             found[result.settings["mode"]][result.slam_seed] = result
         for mode, by_seed in sorted(found.items()):
             if set(range(DEFAULT_SLAM_SEEDS)) <= set(by_seed):
+                results = tuple(by_seed[s] for s in range(DEFAULT_SLAM_SEEDS))
                 cells.append(SlamCell(f"{record.method.name}@{record.method.version}", record.task.id,
-                                      mode, tuple(by_seed[s] for s in range(DEFAULT_SLAM_SEEDS)),
-                                      seen_mark(record_seen(record))))
+                                      mode, results, seen_mark(record_seen(record)),
+                                      band_closures(record, mode, results[0].threshold)))
     return cells
 
 
@@ -89,6 +94,13 @@ def _marks(cells: Sequence[SlamCell], backend: str) -> dict[int, str]:
     tied = [i for i in rest if not (lambda d: d.excludes_zero() and d.mean < 0)(
         paired_ate_difference(cells[top].ate(backend), cells[i].ate(backend)))]
     return {top: BEST} if not tied else {i: TIED for i in (top, *tied)}
+
+
+def _band(cell: SlamCell) -> str:
+    """The false closures of a row that lie in the 3-20 m band, when it has false closures."""
+    if cell.band is None or not cell.results[0].closures_false:
+        return ""
+    return f" ({cell.band} in 3–20 m)"
 
 
 def _text(values: list[float], mark: str | None) -> str:
@@ -119,7 +131,8 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
              "the revisit table's mark) is shown, never ranked, and so is a row that accepted no "
              "closure (it is the odometry alone). *false* counts every accepted closure whose "
              "match is not a true place, those 3–20 m away included, which the recall tables "
-             "leave out as ambiguous; each false closure enters the graph as a random "
+             "leave out as ambiguous; the count in brackets is how many of a row's false "
+             "closures lie in that band. Each false closure enters the graph as a random "
              "measurement.", ""]
     for task, group in sorted(by_task.items()):
         group.sort(key=lambda c: (c.mode != "sequence", c.method))
@@ -144,7 +157,7 @@ def slam_markdown(title: str, cells: Sequence[SlamCell], level: int = 1) -> str 
             estimated = f" ({r.closures_estimated} own pose)" if r.closures_estimated else ""
             failed = [b for b in BACKENDS if any(v != v for v in cell.ate(b))]
             lines.append(f"| {cell.method}{cell.seen} | {MODE_LABEL.get(cell.mode, cell.mode)} | "
-                         f"{r.closures_true} / {r.closures_false}{estimated} | "
+                         f"{r.closures_true} / {r.closures_false}{_band(cell)}{estimated} | "
                          + " | ".join(_text(cell.ate(b), marks[b].get(i)) for b in BACKENDS) + " |"
                          + (f" (did not converge on some seed: {', '.join(failed)})" if failed else ""))
         lines.append("")
@@ -158,6 +171,7 @@ def slam_json(cells: Sequence[SlamCell]) -> str:
         row = {"method": cell.method, "task": cell.task, "mode": cell.mode,
                "closures_true": cell.results[0].closures_true,
                "closures_false": cell.results[0].closures_false,
+               "closures_false_in_band": cell.band,
                "threshold": cell.results[0].threshold,
                "threshold_rule": cell.results[0].threshold_rule}
         for b in (None, *BACKENDS):

@@ -555,7 +555,12 @@ def run_grid(
     lines = options.progress and not bars  # a log or CI: a line per finished cell, no bars
     if lines and todo:
         say(f"preparing the views of {len(todo)} cell(s)")
-    tasks = _prepare_views(cells, todo, parallel, bars, failed, outcomes)
+    t_views = time.perf_counter()
+    with frame_progress.heartbeat(say if lines and todo else None, "preparing the views",
+                                  _CellFrames.LOG_EVERY_S):
+        tasks = _prepare_views(cells, todo, parallel, bars, failed, outcomes)
+    if lines and todo:
+        say(f"views of {len(tasks)} cell(s) ready in {time.perf_counter() - t_views:.0f} s")
     names = "/".join(m.name for m in methods)
 
     def line(k: int, n: int, i: int, what: str) -> None:

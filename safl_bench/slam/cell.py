@@ -324,6 +324,27 @@ def _slam_seed(record: ResultRecord, settings: SlamSettings) -> int:
     return record.seed if settings.seed is None else int(settings.seed)
 
 
+def accepted_mask(outcomes: Outcomes, threshold: float | None) -> np.ndarray:
+    """Which stored outcomes a threshold accepts as closures: those that matched a frame with
+    a confidence at or above `threshold` (None: none)."""
+    assert outcomes.match is not None
+    answered = outcomes.match >= 0
+    if threshold is None:
+        return np.zeros_like(answered)
+    return answered & (outcomes.confidence >= threshold)
+
+
+def band_closures(record: ResultRecord, mode: str, threshold: float | None) -> int | None:
+    """How many of the closures `threshold` accepts in `record` (matching `mode`) lie in the
+    protocol's ambiguous band (3-20 m on the revisit tasks: neither a true place nor beyond the
+    false-positive radius); they count as false closures here. None without per-query matches."""
+    result = record.results.get(mode)
+    if result is None or result.queries is None or result.queries.match is None:
+        return None
+    outcomes = result.queries.outcomes()
+    return int((accepted_mask(outcomes, threshold) & (outcomes.label == AMBIGUOUS)).sum())
+
+
 def accepted_closures(poses: np.ndarray, start: int, outcomes: Outcomes, threshold: float | None,
                       slam_seed: int) -> Closures:
     """The closures a threshold accepts (module doc): every stored outcome k that matched a
@@ -331,10 +352,7 @@ def accepted_closures(poses: np.ndarray, start: int, outcomes: Outcomes, thresho
     ``start + k`` to its matched frame, true where the record labels it correct, measured as
     `closure_measurements` draws it (the method's own relative pose where it gives one)."""
     assert outcomes.match is not None
-    answered = outcomes.match >= 0
-    accepted = (answered & (outcomes.confidence >= threshold) if threshold is not None
-                else np.zeros_like(answered))
-    index = np.flatnonzero(accepted)
+    index = np.flatnonzero(accepted_mask(outcomes, threshold))
     own = getattr(outcomes, "relative_pose", None)
     return closure_measurements(poses, start + index, outcomes.match[index],
                                 (outcomes.label == CORRECT)[index], outcomes.confidence[index],
