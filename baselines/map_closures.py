@@ -20,7 +20,11 @@ threshold 35; a map skips the 3 maps before it (``no_of_local_maps_to_skip``); a
 more than 2 descriptor matches. RANSAC (``AlignRansac2D.cpp`` lines 60-69, 92): 688 trials,
 inliers within 3 cells, samples drawn from ``std::random_device``: NOT seedable, so answers can
 differ between two identical runs (measured in docs/guides/map-closures.md, "Repeatability");
-`deterministic` is False.
+`deterministic` is False. So on a task where nothing is random (the revisit and BEVPlace
+protocols) `safl-bench run` runs each cell `safl_bench.run.runner.REPEATS` (3) times, as seeds
+0-2, and the tables read them as runs of one cell: its value is their mean, its interval covers
+their spread (`safl_bench.results.records.is_repeat`); a paper-protocol cell's noise seeds are
+already separate runs.
 
 How the harness feeds it (MapClosures is online: each call adds the map to its database, and it
 has no query-only call in its Python API, ``Match`` being a protected C++ method):

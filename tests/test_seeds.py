@@ -65,6 +65,51 @@ def test_cell_seeds_follow_the_task_unless_overridden() -> None:
     assert runner.cell_seeds(fixed, seeds=[4, 2]) == (4, 2)  # asked for by name: run as asked
 
 
+def test_a_method_that_cannot_be_seeded_runs_a_fixed_task_several_times() -> None:
+    """MapClosures' RANSAC cannot be seeded: on a task where nothing is random its cell runs
+    REPEATS times, as seeds the records and tables read as runs of one cell (`is_repeat`)."""
+    import dataclasses
+
+    from record_factory import make_record
+
+    from safl_bench.results.records import is_repeat
+
+    class Unseeded:
+        deterministic = False
+
+    noisy, fixed = spec("SAFL/Synth00-T5R1-v6"), spec("SAFL/Synth00-Revisit-v6")
+    assert runner.cell_seeds(fixed, method=Unseeded()) == tuple(range(runner.REPEATS)) == (0, 1, 2)  # type: ignore[arg-type]
+    assert runner.cell_seeds(fixed, n_seeds=5, method=Unseeded()) == (0, 1, 2, 3, 4)  # type: ignore[arg-type]
+    assert runner.cell_seeds(noisy, method=Unseeded()) == (0, 1, 2, 3, 4)  # type: ignore[arg-type]  # its seeds already
+    assert runner.cell_seeds(fixed, method=make_method("sad", size=16)) == (0,)
+    revisit = make_record("mc", protocol="revisit", sequence="00")
+    assert not is_repeat(revisit) and is_repeat(dataclasses.replace(revisit, seed=2))
+    assert not is_repeat(make_record(seed=3, condition="T1R1"))  # a noise seed, not a repeat
+    assert is_repeat(make_record(seed=1, condition="T0R0"))
+
+
+def test_tables_read_repeated_runs_as_one_cell() -> None:
+    import dataclasses
+
+    from record_factory import make_record
+
+    from safl_bench.leaderboard.grouping import table_key
+    from safl_bench.leaderboard.tables import revisit_table
+
+    runs = [dataclasses.replace(make_record("mc", protocol="revisit", f1=0.5 + 0.01 * k), seed=k)
+            for k in range(3)]
+    other = make_record("a", protocol="revisit", f1=0.8)
+    table = revisit_table(table_key(other), [*runs, other])
+    assert table.seeds == frozenset({0})  # the table's seeds: the runs do not widen them
+    notes = "\n".join(table.notes)
+    assert "mc v1 sequence: seeds 0, 1, 2 are runs of one cell" in notes
+    assert "over seed(s)" not in notes  # neither row is called a row over other seeds
+    row = table.rows.index(("mc", "1", "sequence"))
+    (col,) = [j for j, c in enumerate(table.columns) if c.endswith("F1max")]
+    cell = table.cells[row][col]
+    assert cell is not None and cell.mean is not None and abs(cell.mean - 0.51) < 1e-9
+
+
 def test_run_runs_every_declared_seed_once_and_reuses_them(seed_tasks, kitti_root, tmp_path) -> None:
     sad = make_method("sad", size=16)
     first = runner.run_grid([sad], [NOISY, FIXED], _options(kitti_root, tmp_path))

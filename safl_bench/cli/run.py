@@ -44,7 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     seeds.add_argument("--seeds", type=seed_count, metavar="N",
                        help="run the first N noise seeds of each task whose queries are random "
                             "(default: all the seeds the task declares, five; a task where nothing "
-                            "is random has one)")
+                            "is random has one, run 3 times, as seeds 0-2, by a method that "
+                            "cannot be seeded, such as map_closures)")
     seeds.add_argument("--seed", type=seed, action="append", metavar="S",
                        help="run exactly this noise seed on every task; repeatable")
     parser.add_argument("--results", metavar="DIR", help="records directory (default: $SAFL_RESULTS or ./results)")

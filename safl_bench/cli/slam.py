@@ -228,7 +228,7 @@ def after_cells(outcomes: list[CellOutcome], results_dir: Path, *, kitti_root: s
     import dataclasses
 
     from safl_bench.errors import SaflError
-    from safl_bench.results.records import load_record, record_path
+    from safl_bench.results.records import is_repeat, load_record, record_path
     from safl_bench.slam.cell import (
         DEFAULT_SLAM_SEEDS,
         DEPLOY_FROM,
@@ -243,6 +243,8 @@ def after_cells(outcomes: list[CellOutcome], results_dir: Path, *, kitti_root: s
     for o in outcomes:
         record = o.record
         if o.status == "failed" or record is None or record.task.protocol != "revisit":
+            continue
+        if is_repeat(record):  # a repeated run of an unseedable method: the first run is scored
             continue
         cell = f"{record.method.name}@{record.method.version} on {record.task.id} seed {record.seed}"
         partner = DEPLOY_FROM.get(record.task.id)

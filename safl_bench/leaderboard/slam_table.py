@@ -24,7 +24,7 @@ from pathlib import Path
 
 from safl_bench.leaderboard.intervals import BEST, TIED
 from safl_bench.methods.training_data import record_seen, seen_mark
-from safl_bench.results.records import ResultRecord
+from safl_bench.results.records import ResultRecord, is_repeat
 from safl_bench.slam.backend import BACKENDS
 from safl_bench.slam.cell import (
     DEFAULT_RPE_DELTA_M,
@@ -64,6 +64,8 @@ def load_cells(records: Sequence[ResultRecord], folder: Path) -> list[SlamCell]:
     records' folder: ``<method>@<version>/<task>/slam-seed-<n>.s<k>.<digest>.json``)."""
     cells = []
     for record in records:
+        if is_repeat(record):  # a repeated run of an unseedable method: its first run is scored
+            continue
         directory = folder / f"{record.method.name}@{record.method.version}" / record.task.id.replace("/", "__")
         found: dict[str, dict[int, SlamResult]] = defaultdict(dict)
         for path in sorted(directory.glob(f"slam-seed-{record.seed}.s*.json")):

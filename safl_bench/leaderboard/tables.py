@@ -33,7 +33,7 @@ from safl_bench.leaderboard.grouping import (
     seed_set,
 )
 from safl_bench.leaderboard.intervals import BEST, TIED
-from safl_bench.results.records import MODES, Metrics, ResultRecord, timed_under_load
+from safl_bench.results.records import MODES, Metrics, ResultRecord, is_repeat, timed_under_load
 
 MISSING = "—"
 UNDEFINED = "n/a"
@@ -309,7 +309,10 @@ def _build(
         seen_mark,
     )
 
-    seeds = seed_set(records)
+    # repeated runs of an unseedable method (`records.is_repeat`) are that cell's runs, not seeds
+    # of the table: they neither widen its seeds nor count as a row over other seeds
+    seeds = seed_set([r for r in records if not is_repeat(r)]) or seed_set(records)
+    repeated: dict[RowKey, set[int]] = defaultdict(set)
     values: dict[tuple[RowKey, str], dict[int, float | None]] = defaultdict(dict)
     sources: dict[tuple[RowKey, str], dict[int, ResultRecord]] = defaultdict(dict)
     probe: dict[tuple[RowKey, str], tuple[str, str | None]] = {}
@@ -329,6 +332,8 @@ def _build(
                 row = (row[0], row[1] + UNTRAINED_MARK, row[2])
             if mark:
                 seen_rows.add(row)
+            if is_repeat(record):
+                repeated[row].add(record.seed)
             values[(row, v.column)][record.seed] = v.value
             sources[(row, v.column)][record.seed] = record
             probe[(row, v.column)] = (v.mode, v.measure)
@@ -373,6 +378,8 @@ def _build(
     for row in rows:
         for column in columns:
             have = values.get((row, column))
+            if have and row in repeated:
+                continue  # its note says what its seeds are (below)
             if have and set(have) != seeds:
                 own[(row, tuple(sorted(have)))].append(column)
     all_notes = list(notes)
@@ -408,6 +415,12 @@ def _build(
         all_notes.append(f"Rows whose version says '{UNTRAINED_MARK.strip()}': scored with the "
                          "method's untrained (random) networks (`--weights untrained`), not "
                          "trained weights.")
+    for row in sorted(repeated, key=_row_sort_key):
+        runs = {seed for column in columns for seed in values.get((row, column), {})}
+        all_notes.append(
+            f"{_row_label(row)}: seeds {format_seeds(runs)} are runs of one cell, repeated because nothing in its task is random and the method "
+            "cannot be seeded (`deterministic = False`; `safl_bench.run.runner.REPEATS`): its value "
+            "is their mean and its interval covers their spread.")
     if abstaining:
         all_notes.append(
             "Never marked best or tied, as they answered fewer than "

@@ -498,6 +498,19 @@ def seed_outcomes(records: Sequence[ResultRecord], mode: str) -> list[Outcomes] 
     return out
 
 
+def is_repeat(record: ResultRecord) -> bool:
+    """Whether `record` is a repeated run of a cell rather than a cell of its own: a seed other
+    than its task's on a task where nothing is random (a paper-protocol T0R0 task, the revisit
+    and BEVPlace protocols). Such seeds change no query; the runner makes them only for a method
+    that cannot be seeded (`safl_bench.run.runner.REPEATS`), so the tables read them as runs of
+    the task seed's cell and the loop-closure stage scores the first run alone."""
+    from safl_bench.views.noise import Condition
+
+    task = record.task
+    random = task.protocol == "paper" and not Condition.parse(task.spec.get("condition") or "T0R0").is_clean
+    return not random and record.seed != int(task.spec.get("seed", 0))
+
+
 def rerun_command(record: ResultRecord) -> str:
     """The command that recomputes `record` with this code."""
     from safl_bench.sources import root_options

@@ -454,14 +454,25 @@ def run_cells(
     return run_grid([method], task_ids, options, log=log, parallel=parallel)
 
 
+#: Runs of a cell whose method cannot be seeded (``deterministic = False``: MapClosures' RANSAC
+#: draws from ``std::random_device``) on a task where nothing is random: its seeds 0..REPEATS-1
+#: are repeated runs of one cell (`safl_bench.results.records.is_repeat`), so its interval covers
+#: the run-to-run spread as a noisy task's covers its seeds. Three: the most the cost bound of a
+#: MapClosures cell allows (issue 47: at most 3x one run).
+REPEATS = 3
+
+
 def cell_seeds(task: TaskSpec, seeds: Sequence[int] | None = None,
-               n_seeds: int | None = None) -> tuple[int, ...]:
+               n_seeds: int | None = None, method: Method | None = None) -> tuple[int, ...]:
     """The noise seeds to run of `task`: `seeds` when given (every task), else its first
     `n_seeds` (tasks whose queries are random; a task where nothing is random has one seed),
-    else all the seeds it declares (`TaskSpec.seeds`)."""
+    else all the seeds it declares (`TaskSpec.seeds`). A `method` that cannot be seeded runs a
+    task where nothing is random `REPEATS` times (`n_seeds` times when given), as seeds."""
     if seeds is not None:
         return tuple(seeds)
     declared = task.seeds
+    if method is not None and not getattr(method, "deterministic", True) and not task.is_random:
+        return tuple(range(task.seed, task.seed + (n_seeds or REPEATS)))
     if n_seeds is None or len(declared) == 1:
         return declared
     return tuple(range(task.seed, task.seed + n_seeds))
@@ -502,14 +513,15 @@ def run_grid(
                           "records would share a path; run them into separate --results")
     if seeds is None and options.seed is not None:
         seeds = [options.seed]
-    per_task = {t: cell_seeds(spec(t), seeds, n_seeds) for t in task_ids}
-    depth = max((len(v) for v in per_task.values()), default=0)
+    per_cell = {(m, t): cell_seeds(spec(t), seeds, n_seeds, methods[m])
+                for m in range(len(methods)) for t in task_ids}
+    depth = max((len(v) for v in per_cell.values()), default=0)
     cells = [
-        (method, task_id, dataclasses.replace(options, seed=per_task[task_id][j]))
-        for method in methods
+        (method, task_id, dataclasses.replace(options, seed=per_cell[(m, task_id)][j]))
+        for m, method in enumerate(methods)
         for j in range(depth)
         for task_id in task_ids
-        if j < len(per_task[task_id])
+        if j < len(per_cell[(m, task_id)])
     ]
 
     def failed(i: int, message: str) -> CellOutcome:
