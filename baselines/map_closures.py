@@ -19,7 +19,7 @@ inliers_threshold``), so a candidate with 5 inliers or fewer is not reported. Fi
 threshold 35; a map skips the 3 maps before it (``no_of_local_maps_to_skip``); a candidate needs
 more than 2 descriptor matches. RANSAC (``AlignRansac2D.cpp`` lines 60-69, 92): 688 trials,
 inliers within 3 cells, samples drawn from ``std::random_device``: NOT seedable, so answers can
-differ between two identical runs (measured in docs/guides/map-closures.md, "Repeatability");
+differ between two identical runs (measured in docs/reference/map-closures.md, "Repeatability");
 `deterministic` is False. So on a task where nothing is random (the revisit and BEVPlace
 protocols) `safl-bench run` runs each cell `safl_bench.run.runner.REPEATS` (3) times, as seeds
 0-2, and the tables read them as runs of one cell: its value is their mean, its interval covers
@@ -56,7 +56,7 @@ Inputs. ``input_kind = "points"``: the pipeline's local maps in each viewpoint's
 default, KITTI scans). On a source without points (top-view image folders, e.g. BEVPlace's
 KITTI images) it reads the images through `density_to_points` (``reads_topview``), the adapter
 that turns a density image back into points; what it changes is measured by
-``tools/map_closures_adapter.py`` (docs/guides/map-closures.md).
+``tools/map_closures_adapter.py`` (docs/reference/map-closures.md).
 
 Relative pose. MapClosures' ``closure.pose`` maps the reference (source, database) map's
 points into the query (target) map's frame (``MapClosures.cpp`` lines 219-232: RANSAC fits

@@ -202,3 +202,19 @@ def test_bad_seeds_are_one_line_and_exit_2(args, message, capsys) -> None:
     err = capsys.readouterr().err
     assert code == 2 and message in err
     assert len(err.strip().splitlines()) == 1, err
+
+
+def test_repeated_runs_are_ranked_run_by_run_against_one_run() -> None:
+    import dataclasses
+
+    from record_factory import make_record
+
+    from safl_bench.leaderboard.intervals import _runs_paired
+
+    runs = tuple(dataclasses.replace(make_record("mc", protocol="revisit"), seed=k) for k in range(3))
+    one = (make_record("a", protocol="revisit"),)
+    paired = _runs_paired(runs, one)
+    assert [r.seed for r in paired] == [0, 1, 2] and all(r.method.name == "a" for r in paired)
+    assert _runs_paired(one, runs) == runs  # the runs stay as they are
+    noisy = tuple(make_record("b", seed=k) for k in range(3))  # noise seeds, not runs
+    assert _runs_paired(noisy, one) == one

@@ -1,4 +1,4 @@
-"""What the density-image adapter changes for MapClosures (docs/guides/map-closures.md).
+"""What the density-image adapter changes for MapClosures (docs/reference/map-closures.md).
 
     python tools/map_closures_adapter.py --kitti-root ../shared/kitti-run [--frames 10]
     python tools/map_closures_adapter.py                  # the synthetic default, frames 0-9

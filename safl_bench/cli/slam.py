@@ -18,7 +18,7 @@ HELP = (
     "registration noise, false ones random), solved by GTSAM with least squares, a Cauchy kernel "
     "and GNC (truncated least squares); prints ATE and RPE (evo) of each beside the odometry "
     "alone and writes them as JSON beside the record. Needs safl-bench[slam] (gtsam, evo). "
-    "Modelling choices and sources: docs/guides/slam.md."
+    "Modelling choices and sources: docs/reference/slam-stage.md."
 )
 
 
@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--also", action="append", default=[], metavar="NAME[@VERSION]",
                         help="with --curve: another method's curve on the same axes (repeatable)")
     parser.add_argument("--drift", choices=list(DRIFT_LEVELS), default=DEFAULT_DRIFT,
-                        help="odometry drift level (default %(default)s; docs/guides/slam.md)")
+                        help="odometry drift level (default %(default)s; docs/reference/slam-stage.md)")
     parser.add_argument("--mode", choices=["sequence", "single_frame"],
                         help="whose matches become closures (default: the sequence matcher's, or "
                              "single_frame for a method whose records hold only those, a retrieval "

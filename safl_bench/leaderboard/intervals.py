@@ -11,6 +11,9 @@ tables share it). Ranks:
 * **Tied for best** (marked "≈"): the best and every cell whose paired difference to it does
   not exclude 0; also when a difference cannot be computed (records without per-query
   outcomes, metrics version 1), since then nothing says the order is beyond the noise.
+* A cell whose seeds are repeated runs of one cell (`records.is_repeat`: an unseedable method
+  on a task where nothing is random) is paired run by run with the other cell's one run, so its
+  run-to-run spread widens the difference's interval.
 
 Which cells are ranked at all is the tables' rule (`safl_bench.leaderboard.tables`): not rows
 seen in training, and not cells whose method answered fewer than half of the queries with a
@@ -21,6 +24,7 @@ With one seed the interval is over the queries alone (a fixed split, or a cell r
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -28,7 +32,7 @@ from dataclasses import dataclass
 
 from safl_bench.errors import DataError
 from safl_bench.evaluation.uncertainty import Interval, Sample, sample
-from safl_bench.results.records import ResultRecord, seed_outcomes
+from safl_bench.results.records import ResultRecord, is_repeat, seed_outcomes
 
 BEST, TIED = "best", "tied"
 
@@ -81,15 +85,27 @@ class Ranked:
     measure: str | None  # the `uncertainty` measure name; None: no interval (no ranks)
 
 
+def _runs_paired(a: tuple[ResultRecord, ...], b: tuple[ResultRecord, ...]) -> tuple[ResultRecord, ...]:
+    """`b`'s records paired with `a`'s: when `a` holds repeated runs of one cell
+    (`records.is_repeat`) and `b` is one run of a cell without repeats, that run stands for
+    every run of `a` (nothing in the task is random, so a method that can be seeded answers
+    every seed alike), so the difference carries `a`'s run-to-run spread; else `b` as it is."""
+    if len(b) == 1 and not is_repeat(b[0]) and any(is_repeat(r) for r in a):
+        return tuple(dataclasses.replace(b[0], seed=r.seed) for r in a)
+    return b
+
+
 def _difference(a: Ranked, b: Ranked) -> Interval | None:
-    """a - b on the seeds both have, or None when it cannot be computed."""
+    """a - b on the seeds both have (a cell's repeated runs against another's one run: each
+    run against that run, `_runs_paired`), or None when it cannot be computed."""
     if a.measure is None:
         return None
-    shared = {r.seed for r in a.records} & {r.seed for r in b.records}
+    ra, rb = _runs_paired(b.records, a.records), _runs_paired(a.records, b.records)
+    shared = {r.seed for r in ra} & {r.seed for r in rb}
     if not shared:
         return None
-    sa = cell_sample([r for r in a.records if r.seed in shared], a.mode)
-    sb = cell_sample([r for r in b.records if r.seed in shared], b.mode)
+    sa = cell_sample([r for r in ra if r.seed in shared], a.mode)
+    sb = cell_sample([r for r in rb if r.seed in shared], b.mode)
     if sa is None or sb is None:
         return None
     try:

@@ -1,6 +1,6 @@
 """What goes into the pose graph: odometry with seeded drift and loop closures, in 2-D (x, y, yaw).
 
-Every choice here is stated with its source in docs/guides/slam.md; in short:
+Every choice here is stated with its source in docs/reference/slam-stage.md; in short:
 
 * **Odometry** is the ground-truth relative motion between consecutive poses with drift at one
   of `DRIFT_LEVELS`, each a translational error in % of the distance travelled and a heading
