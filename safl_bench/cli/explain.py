@@ -21,7 +21,7 @@ HELP = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", required=True, metavar="NAME[@VERSION]",
-                        help="the method of the cell (its record's; a bare name is its newest version)")
+                        help="the method of the cell (its record's; a bare name is the version `run` runs on the task's data)")
     parser.add_argument("--task", required=True, metavar="ID", help="the task id of the cell")
     parser.add_argument("--seed", type=seed, help="seed of the query noise (default: the task's own)")
     parser.add_argument("--results", metavar="DIR",
