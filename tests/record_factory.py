@@ -50,6 +50,7 @@ def make_record(
     modes: tuple[str, ...] = ("sequence", "single_frame"),
     spec_fingerprint: str = "abcd1234",
     created: str = "2025-01-01T00:00:00Z",
+    deterministic: bool = True,
 ) -> ResultRecord:
     """A complete record; the single-frame mode scores lower than the sequence mode by default."""
     prefix = {"synth": "Synth", "kitti": "KITTI", "bev": "BEVKITTI"}[source_kind]
@@ -74,7 +75,8 @@ def make_record(
             **curves(10.0 * auc * scale),
         )
     return ResultRecord(
-        method=MethodInfo(name=method, version=method_version, params={"latent": 1024}),
+        method=MethodInfo(name=method, version=method_version, params={"latent": 1024},
+                          deterministic=deterministic),
         task=TaskInfo(
             id=task_id,
             version=task_version,

@@ -82,10 +82,17 @@ def test_a_method_that_cannot_be_seeded_runs_a_fixed_task_several_times() -> Non
     assert runner.cell_seeds(fixed, n_seeds=5, method=Unseeded()) == (0, 1, 2, 3, 4)  # type: ignore[arg-type]
     assert runner.cell_seeds(noisy, method=Unseeded()) == (0, 1, 2, 3, 4)  # type: ignore[arg-type]  # its seeds already
     assert runner.cell_seeds(fixed, method=make_method("sad", size=16)) == (0,)
-    revisit = make_record("mc", protocol="revisit", sequence="00")
+    revisit = make_record("mc", protocol="revisit", sequence="00", deterministic=False)
     assert not is_repeat(revisit) and is_repeat(dataclasses.replace(revisit, seed=2))
-    assert not is_repeat(make_record(seed=3, condition="T1R1"))  # a noise seed, not a repeat
-    assert is_repeat(make_record(seed=1, condition="T0R0"))
+    assert not is_repeat(make_record(seed=3, condition="T1R1", deterministic=False))  # a noise seed
+    assert is_repeat(make_record(seed=1, condition="T0R0", deterministic=False))
+    # a seedable method's other seeds on a fixed task stay seeds
+    assert not is_repeat(make_record("sad", protocol="revisit", seed=1))
+    # the record says which kind of method made it
+    sad = make_method("sad", size=16)
+    assert runner.method_info(sad).deterministic
+    sad.deterministic = False  # type: ignore[attr-defined]
+    assert not runner.method_info(sad).deterministic
 
 
 def test_tables_read_repeated_runs_as_one_cell() -> None:
@@ -96,8 +103,8 @@ def test_tables_read_repeated_runs_as_one_cell() -> None:
     from safl_bench.leaderboard.grouping import table_key
     from safl_bench.leaderboard.tables import revisit_table
 
-    runs = [dataclasses.replace(make_record("mc", protocol="revisit", f1=0.5 + 0.01 * k), seed=k)
-            for k in range(3)]
+    runs = [dataclasses.replace(make_record("mc", protocol="revisit", f1=0.5 + 0.01 * k,
+                                          deterministic=False), seed=k) for k in range(3)]
     other = make_record("a", protocol="revisit", f1=0.8)
     table = revisit_table(table_key(other), [*runs, other])
     assert table.seeds == frozenset({0})  # the table's seeds: the runs do not widen them
@@ -211,7 +218,8 @@ def test_repeated_runs_are_ranked_run_by_run_against_one_run() -> None:
 
     from safl_bench.leaderboard.intervals import _runs_paired
 
-    runs = tuple(dataclasses.replace(make_record("mc", protocol="revisit"), seed=k) for k in range(3))
+    runs = tuple(dataclasses.replace(make_record("mc", protocol="revisit", deterministic=False), seed=k)
+                 for k in range(3))
     one = (make_record("a", protocol="revisit"),)
     paired = _runs_paired(runs, one)
     assert [r.seed for r in paired] == [0, 1, 2] and all(r.method.name == "a" for r in paired)

@@ -160,6 +160,11 @@ class MethodInfo:
     #: "descriptor" (describe + distance) or "retrieval" (ranked, verified candidates: no
     #: difference matrix, so no sequence-matcher result; `safl_bench.methods.retrieval`)
     kind: Literal["descriptor", "retrieval"] = "descriptor"
+    #: False for a method that cannot be seeded (its answers vary between identical runs:
+    #: MapClosures' RANSAC draws from std::random_device). On a task where nothing is random
+    #: such a method's seeds are repeated runs of one cell (`is_repeat`); True in records
+    #: written before the field existed.
+    deterministic: bool = True
 
 
 @dataclass(frozen=True)
@@ -499,16 +504,19 @@ def seed_outcomes(records: Sequence[ResultRecord], mode: str) -> list[Outcomes] 
 
 
 def is_repeat(record: ResultRecord) -> bool:
-    """Whether `record` is a repeated run of a cell rather than a cell of its own: a seed other
-    than its task's on a task where nothing is random (a paper-protocol T0R0 task, the revisit
-    and BEVPlace protocols). Such seeds change no query; the runner makes them only for a method
-    that cannot be seeded (`safl_bench.run.runner.REPEATS`), so the tables read them as runs of
-    the task seed's cell and the loop-closure stage scores the first run alone."""
+    """Whether `record` is a repeated run of a cell rather than a cell of its own: a method that
+    cannot be seeded (`MethodInfo.deterministic` false), at a seed other than its task's, on a
+    task where nothing is random (a paper-protocol T0R0 task, the revisit and BEVPlace
+    protocols). Such seeds change no query; the runner makes them for such a method
+    (`safl_bench.run.runner.REPEATS`), so the tables read them as runs of the task seed's cell
+    and the loop-closure stage scores the first run alone. A seedable method run there at other
+    seeds (asked for with --seed) answers the same at each: those records stay seeds."""
     from safl_bench.views.noise import Condition
 
     task = record.task
     random = task.protocol == "paper" and not Condition.parse(task.spec.get("condition") or "T0R0").is_clean
-    return not random and record.seed != int(task.spec.get("seed", 0))
+    return (not record.method.deterministic and not random
+            and record.seed != int(task.spec.get("seed", 0)))
 
 
 def rerun_command(record: ResultRecord) -> str:

@@ -139,7 +139,8 @@ def method_info(method: Method) -> MethodInfo:
     config = method.config()
     params = {k: v for k, v in config.items() if k not in ("name", "version")}
     return MethodInfo(name=method.name, version=str(method.version), params=params,
-                      kind="retrieval" if is_retrieval(method) else "descriptor")
+                      kind="retrieval" if is_retrieval(method) else "descriptor",
+                      deterministic=bool(getattr(method, "deterministic", True)))
 
 
 def view_kind(method: Method, task: Task) -> str:
