@@ -115,6 +115,7 @@ def test_tables_read_repeated_runs_as_one_cell() -> None:
     (col,) = [j for j, c in enumerate(table.columns) if c.endswith("F1max")]
     cell = table.cells[row][col]
     assert cell is not None and cell.mean is not None and abs(cell.mean - 0.51) < 1e-9
+    assert cell.seeds == table.seeds and "(seed 0, 1, 2)" not in table.markdown()  # runs, not seeds
 
 
 def test_run_runs_every_declared_seed_once_and_reuses_them(seed_tasks, kitti_root, tmp_path) -> None:

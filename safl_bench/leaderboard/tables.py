@@ -351,6 +351,9 @@ def _build(
             if cell is not None and cell.mean is not None and with_intervals:
                 cell = _with_interval(cell, values[(row, column)],
                                       list(sources[(row, column)].values()), *probe[(row, column)])
+            if cell is not None and repeated.get(row):
+                # its runs are one cell's: it is over the seeds it was run at, not over the runs
+                cell = replace(cell, seeds=cell.seeds - repeated[row])
             line.append(cell)
         cells.append(line)
     marks: dict[tuple[int, int], str] = {}
