@@ -223,7 +223,7 @@ def check_method(
 
 def _check_retrieval(method: Method, views: Any, label: str, fit: bool) -> Method:
     """`RETRIEVAL_CHECKS` after attributes and params (module docstring)."""
-    from safl_bench.methods.retrieval import Retrieval
+    from safl_bench.methods.retrieval import Retrieval, is_deterministic
 
     n = len(views)
     if n < 4:
@@ -262,7 +262,7 @@ def _check_retrieval(method: Method, views: Any, label: str, fit: bool) -> Metho
         _fail("same-frames-earlier", f"{label}: with same_frames, query {late[0][0]} lists frame "
               f"{late[0][1]}, not an earlier one (the harness would drop it; an online method "
               "must not see later frames)")
-    if getattr(method, "deterministic", True):
+    if is_deterministic(method):
         again = answer(views, views)
         if not (np.array_equal(first.index, again.index)
                 and np.array_equal(first.confidence, again.confidence)):

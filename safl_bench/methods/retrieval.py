@@ -182,3 +182,9 @@ class RetrievalMethod(Method):
 def is_retrieval(method: Any) -> bool:
     """True for a method (instance or class) of the retrieval kind."""
     return getattr(method, "kind", "descriptor") == "retrieval"
+
+
+def is_deterministic(method: Any) -> bool:
+    """False for a method (instance or class) whose answers vary between identical runs
+    (``deterministic = False``); True for every other, which need not declare it."""
+    return bool(getattr(method, "deterministic", True))

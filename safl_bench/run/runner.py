@@ -53,7 +53,12 @@ from safl_bench.matching.presets import default_config
 from safl_bench.matching.settings import MODES, EvaluationConfig, same_settings
 from safl_bench.matching.window import RECORD_KEY, WindowChoice
 from safl_bench.methods.method import Method, input_note, method_input, method_selector
-from safl_bench.methods.retrieval import NO_SEQUENCE, NO_SEQUENCE_WHY, is_retrieval
+from safl_bench.methods.retrieval import (
+    NO_SEQUENCE,
+    NO_SEQUENCE_WHY,
+    is_deterministic,
+    is_retrieval,
+)
 from safl_bench.results.records import (
     CorruptRecordError,
     EvaluatedCell,
@@ -140,7 +145,7 @@ def method_info(method: Method) -> MethodInfo:
     params = {k: v for k, v in config.items() if k not in ("name", "version")}
     return MethodInfo(name=method.name, version=str(method.version), params=params,
                       kind="retrieval" if is_retrieval(method) else "descriptor",
-                      deterministic=bool(getattr(method, "deterministic", True)))
+                      deterministic=is_deterministic(method))
 
 
 def view_kind(method: Method, task: Task) -> str:
@@ -472,7 +477,7 @@ def cell_seeds(task: TaskSpec, seeds: Sequence[int] | None = None,
     if seeds is not None:
         return tuple(seeds)
     declared = task.seeds
-    if method is not None and not getattr(method, "deterministic", True) and not task.is_random:
+    if method is not None and not is_deterministic(method) and not task.is_random:
         return tuple(range(task.seed, task.seed + (n_seeds or REPEATS)))
     if n_seeds is None or len(declared) == 1:
         return declared
