@@ -279,3 +279,22 @@ def test_a_task_whose_ground_truth_has_no_positive_is_named(kitti_root, safl_hom
     assert out[0].status == "failed"
     assert out[0].message.startswith(f"task {task_id} (seed 0): no query has a true place")
     assert "\n" not in out[0].message
+
+
+def test_candidates_beyond_the_database_stop_the_run_before_any_view(tiny_tasks, kitti_root,
+                                                                     tmp_path, monkeypatch):
+    import dataclasses
+
+    from safl_bench.errors import ConfigError
+    from safl_bench.matching.presets import default_config
+
+    def no_views(*a: object, **k: object) -> None:
+        raise AssertionError("views were rendered before the option was checked")
+
+    monkeypatch.setattr(runner, "prepare_tasks", no_views)
+    evaluation = dataclasses.replace(default_config(), candidates=500, distance="euclidean")
+    with pytest.raises(ConfigError, match=r"task Test/TinyRun-T1R1-v0: candidates=500 is more "
+                                          r"than the database's \d+ frames"):
+        runner.run_grid([make_method("sad")], list(tiny_tasks),
+                        options(kitti_root, tmp_path, evaluation=evaluation))
+    assert not list(tmp_path.rglob("*.json"))

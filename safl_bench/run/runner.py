@@ -715,6 +715,7 @@ def _prepare_views(
         opened = tasks[i].source
         if share and opened is not None:
             sources.setdefault(key, opened)
+    _check_candidates_fit(cells, tasks)
     kinds = {i: view_kind(cells[i][0], tasks[i]) for i in tasks}
     for kind in dict.fromkeys(kinds.values()):
         members = [i for i in tasks if kinds[i] == kind]
@@ -724,6 +725,23 @@ def _prepare_views(
             outcomes[members[j]] = failed(members[j], message)
             tasks.pop(members[j])
     return tasks
+
+
+def _check_candidates_fit(cells: Sequence[tuple[Method, str, RunOptions]],
+                          tasks: dict[int, Task]) -> None:
+    """A ConfigError, before any view is rendered, when ``--matcher candidates=K`` asks for more
+    frames than a task's database holds: it is an option of the whole run, not a cell's fault,
+    so it stops the run once (exit 2) instead of failing every cell after its views."""
+    from safl_bench.matching.candidates import check_k
+
+    for i, task in tasks.items():
+        k = cells[i][2].evaluation.candidates
+        if k is None:
+            continue
+        try:
+            check_k(k, len(task.database_frames))
+        except ConfigError as exc:
+            raise ConfigError(f"task {task.id}: {exc}") from None
 
 
 def method_labels(outcomes: Sequence[CellOutcome]) -> dict[tuple[str, str], str]:
