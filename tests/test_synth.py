@@ -322,3 +322,30 @@ def test_a_parked_car_is_seen_through_its_windows() -> None:
         filled.append((footprint > 0).mean())
     assert min(inside) > 20
     assert np.mean(filled) > 0.6  # a solid box: 0.58 (of the footprint's pixels, 6 m ahead)
+
+
+def test_a_streamed_sequence_casts_the_scans_a_written_one_stores(tmp_path, monkeypatch):
+    """The long drive's scans are cast on demand (no .bin files), and each equals the scan the
+    generator would have written; its poses and times are the written sequence's."""
+    from safl_bench.sources.synth import SynthSource, StreamedSequence
+    from safl_bench.synth import generate
+
+    streamed = tmp_path / "streamed"
+    synth.ensure(streamed, ["L0"], seed=3, progress=False, config=TINY)
+    assert synth.is_streamed(streamed, "L0") and synth.is_current(streamed, "L0", 3, TINY)
+    assert not list((streamed / "sequences" / "L0" / "velodyne").glob("*.bin"))
+    monkeypatch.setattr(generate, "STREAMED_SEQUENCES", ())  # the same sequence, written
+    written = tmp_path / "written"
+    synth.ensure(written, ["L0"], seed=3, progress=False, config=TINY)
+    monkeypatch.undo()
+    assert len(list((written / "sequences" / "L0" / "velodyne").glob("*.bin"))) == 6
+    cast = SynthSource(root=streamed, label="s", seed=3).sequence("L0")
+    read = SynthSource(root=written, label="w", seed=3).sequence("L0")
+    assert isinstance(cast, StreamedSequence) and not isinstance(read, StreamedSequence)
+    assert len(cast) == len(read) == 6
+    np.testing.assert_array_equal(cast.poses, read.poses)
+    np.testing.assert_array_equal(cast.times, read.times)
+    for i in (0, 5):
+        np.testing.assert_array_equal(cast.scan(i), read.scan(i))
+    with pytest.raises(DataError, match="scan index 6 out of range"):
+        cast.scan(6)

@@ -104,8 +104,8 @@ def _synth_sequence(name: str, seed: int):
     from safl_bench import synth
     from safl_bench.sources.kitti import open_sequence
 
-    if name not in synth.ALL_SEQUENCES:
-        raise DataError(f"unknown synthetic sequence {name!r}; known: {' '.join(synth.ALL_SEQUENCES)}")
+    if name not in synth.KNOWN_SEQUENCES:
+        raise DataError(f"unknown synthetic sequence {name!r}; known: {' '.join(synth.KNOWN_SEQUENCES)}")
     root = synth.default_root(seed)
     synth.ensure(root, [name], seed=seed)
     return root, open_sequence(root, name)

@@ -35,8 +35,8 @@ def main(args: argparse.Namespace) -> int:
     root = Path(args.out).expanduser() if args.out else synth.default_root(seed, version)
     sequences = list(args.sequences) if args.sequences else list(synth.ALL_SEQUENCES)
     for name in sequences:
-        if name not in synth.ALL_SEQUENCES:
-            raise DataError(f"unknown synthetic sequence {name!r}; known: {' '.join(synth.ALL_SEQUENCES)}")
+        if name not in synth.KNOWN_SEQUENCES:
+            raise DataError(f"unknown synthetic sequence {name!r}; known: {' '.join(synth.KNOWN_SEQUENCES)}")
     start = time.perf_counter()
     todo = [n for n in sequences if not synth.is_current(root, n, seed, version=version)]
     synth.ensure(root, sequences, seed=seed, progress=not args.quiet, version=version)

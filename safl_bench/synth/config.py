@@ -31,6 +31,14 @@ TEST_SEQUENCES: tuple[str, ...] = ("00", "09")
 #: Training sequences, in the roles of KITTI 01-08.
 TRAIN_SEQUENCES: tuple[str, ...] = ("01", "02", "03", "04")
 ALL_SEQUENCES: tuple[str, ...] = TEST_SEQUENCES + TRAIN_SEQUENCES
+#: Sequences whose scans are cast when a view needs them, never written (`synth.generate`): the
+#: long drive L0, 20 000 frames (about 16 km) over a 14 x 14 town of about 1.3 x 1.2 km, which
+#: would take 32 GB as KITTI scans (1.6 MB each). About 15 % of its frames revisit a place (8 %
+#: the same way, 7 % the opposite way; data seed 0, `routes.revisit_kinds`), so most of the drive
+#: is new ground, as on a city-scale run. Not in `ALL_SEQUENCES` (`safl-bench data synth` without
+#: names): it is generated when its task (`SAFL/SynthL0-Revisit-v6`) runs, or by name.
+STREAMED_SEQUENCES: tuple[str, ...] = ("L0",)
+KNOWN_SEQUENCES: tuple[str, ...] = ALL_SEQUENCES + STREAMED_SEQUENCES
 
 
 @dataclass(frozen=True)
@@ -54,6 +62,9 @@ SEQUENCE_SPECS: dict[str, SequenceSpec] = {
     "02": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
     "03": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
     "04": SequenceSpec(frames=350, grid_lines=4, revisits="none"),
+    # the long drive (`STREAMED_SEQUENCES`): it comes back either way, as a long real drive does
+    # (the "same" rule, no opposite pass at all, is not met by a 16 km walk)
+    "L0": SequenceSpec(frames=20000, grid_lines=14, revisits="any"),
 }
 #: Changes to `SEQUENCE_SPECS` per data version. From version 6 sequence 09 has 1000 frames: at
 #: 800 (about 700 m) a walk under the loop rule (`synth.routes.LoopRule`: no loop shorter than
@@ -108,7 +119,7 @@ class SynthConfig:
         base = SEQUENCE_SPEC_CHANGES.get(str(version), {}).get(name, SEQUENCE_SPECS.get(name))
         if base is None:
             raise ConfigError(
-                f"unknown synthetic sequence {name!r}; known: {', '.join(ALL_SEQUENCES)}"
+                f"unknown synthetic sequence {name!r}; known: {', '.join(KNOWN_SEQUENCES)}"
             )
         return dataclasses.replace(
             base,

@@ -28,6 +28,7 @@ from safl_bench.synth.config import (
     ALL_SEQUENCES,
     GENERATOR_VERSION,
     GENERATOR_VERSIONS,
+    STREAMED_SEQUENCES,
     SynthConfig,
     sequence_seed,
 )
@@ -99,13 +100,57 @@ def make_scene_world(scene: Scene) -> tuple[World, Lidar]:
     return world, Lidar(scene.config, scene.rngs[3])
 
 
+class Scanner:
+    """The scans of one sequence, each cast when asked for: scan `i` is the same array whether
+    it is written to disk (`generate_sequence`) or cast on demand (`STREAMED_SEQUENCES`), since
+    every scan draws only from its own key and azimuth offset. The town is drawn on the first
+    scan (seconds to a minute, and about 1.5 GB for the long drive's town)."""
+
+    def __init__(self, name: str, seed: int = 0, config: SynthConfig | None = None,
+                 version: str = GENERATOR_VERSION) -> None:
+        self.scene = make_route(name, seed, config, version)
+        self.lidar = Lidar(self.scene.config, self.scene.rngs[3])
+        n = len(self.scene.trajectory)
+        sensor_rng = self.scene.rngs[3]
+        self.keys = sensor_rng.integers(0, 2**63 - 1, size=n, dtype=np.int64)
+        self.offsets = sensor_rng.uniform(0.0, np.radians(self.scene.config.azimuth_res_deg), size=n)
+        self._world: World | None = None
+        self._lock = threading.Lock()
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def world(self) -> World:
+        with self._lock:
+            if self._world is None:
+                self._world = make_world(self.scene.grid, self.scene.rngs[1], self.scene.config.cell_m)
+            return self._world
+
+    def scan(self, i: int) -> np.ndarray:
+        """Scan `i` as float32 (N, 4) in the sensor frame."""
+        return self.lidar.scan(self.world(), self.scene.poses[i], int(self.keys[i]),
+                               float(self.offsets[i]))
+
+
 def _expected_manifest(name: str, seed: int, config: SynthConfig, version: str) -> dict[str, Any]:
-    return {
+    out: dict[str, Any] = {
         "generator_version": version,
         "sequence": name,
         "seed": int(seed),
         "config": to_jsonable(config),
     }
+    if name in STREAMED_SEQUENCES:  # only there, so that the written sequences' manifests stay valid
+        out["scans"] = "cast on demand"
+    return out
+
+
+def is_streamed(root: Path, name: str) -> bool:
+    """Whether sequence `name` under `root` has its scans cast on demand (its manifest says so)."""
+    try:
+        manifest = json.loads(writer.manifest_path(root, name).read_text())
+    except (OSError, ValueError):
+        return False
+    return manifest.get("scans") == "cast on demand"
 
 
 def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None,
@@ -120,16 +165,17 @@ def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None 
     expected = _expected_manifest(name, seed, config, version)
     if any(manifest.get(k) != v for k, v in expected.items()):
         return False
-    sizes = manifest.get("scan_bytes", [])
-    if len(sizes) != manifest.get("frames"):
-        return False
-    velodyne = writer.sequence_dir(root, name) / "velodyne"
-    try:
-        on_disk = {p.name: p.stat().st_size for p in velodyne.glob("*.bin")}
-    except OSError:
-        return False
-    if on_disk != {f"{i:06d}.bin": size for i, size in enumerate(sizes)}:
-        return False
+    if name not in STREAMED_SEQUENCES:
+        sizes = manifest.get("scan_bytes", [])
+        if len(sizes) != manifest.get("frames"):
+            return False
+        velodyne = writer.sequence_dir(root, name) / "velodyne"
+        try:
+            on_disk = {p.name: p.stat().st_size for p in velodyne.glob("*.bin")}
+        except OSError:
+            return False
+        if on_disk != {f"{i:06d}.bin": size for i, size in enumerate(sizes)}:
+            return False
     for rel, digest in manifest.get("text_sha256", {}).items():
         file = root / rel
         if not file.is_file() or writer.file_sha256(file) != digest:
@@ -140,25 +186,24 @@ def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None 
 def generate_sequence(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None,
                       on_frame: Callable[[], None] | None = None,
                       version: str = GENERATOR_VERSION) -> None:
-    """Generate sequence `name` of data `version` under `root` (overwriting whatever is there)."""
+    """Generate sequence `name` of data `version` under `root` (overwriting whatever is there):
+    its scans, text files and manifest; for a sequence of `STREAMED_SEQUENCES` the text files and
+    manifest only (its scans are cast on demand, `Scanner`)."""
     config = config or SynthConfig()
-    scene = make_route(name, seed, config, version)
+    scanner = Scanner(name, seed, config, version)
+    scene = scanner.scene
     manifest = writer.manifest_path(root, name)
     manifest.unlink(missing_ok=True)  # from here on the sequence reads as incomplete
     velodyne = writer.sequence_dir(root, name) / "velodyne"
     velodyne.mkdir(parents=True, exist_ok=True)
     n = len(scene.trajectory)
+    streamed = name in STREAMED_SEQUENCES
     for stale in velodyne.glob("*.bin"):
-        if not stale.stem.isdigit() or int(stale.stem) >= n:
+        if streamed or not stale.stem.isdigit() or int(stale.stem) >= n:
             stale.unlink()
-    world, lidar = make_scene_world(scene)
-    sensor_rng = scene.rngs[3]
-    keys = sensor_rng.integers(0, 2**63 - 1, size=n, dtype=np.int64)
-    offsets = sensor_rng.uniform(0.0, np.radians(config.azimuth_res_deg), size=n)
     sizes = []
-    for i in range(n):
-        points = lidar.scan(world, scene.poses[i], int(keys[i]), float(offsets[i]))
-        sizes.append(writer.write_scan(root, name, i, points))
+    for i in range(0 if streamed else n):
+        sizes.append(writer.write_scan(root, name, i, scanner.scan(i)))
         if on_frame is not None:
             on_frame()
     digests = writer.write_text_files(root, name, scene.lidar_poses(), scene.trajectory.times)
@@ -188,8 +233,11 @@ def ensure(root: Path, sequences: Sequence[str], seed: int = 0, progress: bool =
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DataError(f"cannot create synthetic data root {root}: {exc}") from exc
-    todo.sort(key=lambda n: -config.spec(n, version).frames)  # longest first balances the threads
-    total = sum(config.spec(n, version).frames for n in todo)
+    def cost(n: str) -> int:  # the scans to write
+        return 0 if n in STREAMED_SEQUENCES else config.spec(n, version).frames
+
+    todo.sort(key=lambda n: -cost(n))  # longest first balances the threads
+    total = sum(cost(n) for n in todo)
     lock = threading.Lock()
     stop = threading.Event()  # set on an interrupt so the worker threads end early
     bar = None
@@ -219,4 +267,5 @@ def ensure(root: Path, sequences: Sequence[str], seed: int = 0, progress: bool =
             bar.close()
 
 
-__all__ = ["ALL_SEQUENCES", "check_version", "default_root", "ensure", "generate_sequence", "is_current"]
+__all__ = ["ALL_SEQUENCES", "Scanner", "check_version", "default_root", "ensure", "generate_sequence",
+           "is_current", "is_streamed"]

@@ -96,6 +96,8 @@ SUITES = {
     "bev-rotated": "revisit and BEVPlace's protocols with BEVPlace's rotated top views (KITTIRot) of "
                    "KITTI 00, 02, 05, 06 as queries (--bev-root, --bev-rot-root), and BEVPlace's "
                    "protocol on the rotated views alone, as its main.py (--bev-rot-root)",
+    "long": "the long drive: the revisit protocol at every frame of a 20 000-frame synthetic drive "
+            "(20 000 queries against up to 20 000 database frames; about an hour on 2 cores)",
     "all": "every built-in task",
 }
 #: Suites of one source only: they ignore the source a command's options select.
@@ -231,6 +233,24 @@ def _bevplace(source: str, sequence: str, version: int | None = None) -> TaskSpe
     )
 
 
+#: The long drive (`synth.STREAMED_SEQUENCES`): its sequence and the frame step of its task.
+LONG_SEQUENCE = "L0"
+LONG_STEP = 1
+
+
+def _long_drive() -> TaskSpec:
+    """The revisit protocol on the long drive at every frame, not every 4th: the matcher at the
+    scale of a city run (20 000 queries, each against the frames more than 30 s older), the
+    ground truth and window as on the other revisit tasks."""
+    import dataclasses
+
+    plain = _revisit("synth", LONG_SEQUENCE)
+    return dataclasses.replace(
+        plain, step=LONG_STEP,
+        description=("revisit protocol on the long drive (20 000 frames over a 14 x 14 town, scans "
+                     "cast on demand), every frame"))
+
+
 def rotated_id(sequence: str, protocol: str, rotated: str) -> str:
     """Id of a top-view task on rotated images, e.g. SAFL/BEVKITTI02-BEVPlace-RotQueries-v1
     (queries rotated) or SAFL/BEVKITTIRot02-BEVPlace-v1 (database and queries rotated). Its
@@ -278,6 +298,7 @@ def register_builtin() -> None:
             _add(("sanity",), _paper(source, sequence, CLEAN))
         for sequence in REVISIT_SEQUENCES[source]:
             _add(("revisit", *(("bev-revisit",) if source == "bev" else ())), _revisit(source, sequence))
+    _add(("long",), _long_drive())
     for sequence in BEVPLACE_RANGES:
         _add(("bev-bevplace",), _bevplace("bev", sequence))
     for rotated, protocols in ROTATED_PROTOCOLS.items():
