@@ -139,3 +139,40 @@ def test_synth_source_calls_ensure_and_keys_on_manifest(
     before = source.fingerprint("09")
     manifest_path(source.root, "09").write_text('{"seed": 4}')
     assert source.fingerprint("09") != before
+
+
+def test_a_long_pass_resumes_from_the_chunks_it_finished(kitti_root: Path, safl_home: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pass longer than CHUNK_FRAMES keeps each finished chunk; interrupted, it renders only
+    the chunks it had not finished, and its views are the one-pass ones."""
+    monkeypatch.setattr(mapcache, "CHUNK_FRAMES", 4)
+    source = kitti_source(kitti_root)
+    frames = np.arange(12)
+    real = mapcache._build_chunk
+    calls: list[int] = []
+
+    def interrupted(*args: object) -> object:
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(mapcache, "_build_chunk", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        mapcache.prepare(source, "00", MapConfig(), frames=frames, conditions=[CLEAN, T5], seed=0,
+                         progress=False)
+    kept = list(safl_home.rglob("*.parts/*.zip"))
+    assert len(kept) == 2 and not list(safl_home.rglob("topview-*.npz"))
+    calls.clear()
+    monkeypatch.setattr(mapcache, "_build_chunk", lambda *a: (calls.append(1), real(*a))[1])
+    paths = mapcache.prepare(source, "00", MapConfig(), frames=frames, conditions=[CLEAN, T5],
+                             seed=0, progress=False)
+    assert len(calls) == 1 and not list(safl_home.rglob("*.parts"))
+    direct = build_views(source.sequence("00"), MapConfig(), frames,
+                         {"clean": None, "t5": mapcache.sample_offsets(12, T5, 0)}, ["topview"],
+                         progress=False)
+    for cond, name in ((CLEAN, "clean"), (T5, "t5")):
+        assert paths[cond, "topview"].is_file()
+        views = mapcache.load_views(source, "00", MapConfig(), frames=frames, condition=cond, seed=0,
+                                    progress=False)
+        np.testing.assert_array_equal(views, direct[name, "topview"])

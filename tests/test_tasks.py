@@ -213,7 +213,8 @@ def test_suites_hold_only_the_current_versions() -> None:
         for i in ids:
             spec = tasks.registry[i]
             assert spec.context_queries == (10 if spec.protocol != "revisit" else 0), i
-    assert len(tasks.suite("all", source="synth")) == 28
+    assert len(tasks.suite("all", source="synth")) == 29  # 26 paper, 2 revisit, the long drive
+    assert tasks.suite("long") == ["SAFL/SynthL0-Revisit-v6"]
     assert set(tasks.suite("sanity", source="synth")) == {"SAFL/Synth00-T0R0-v6",
                                                           "SAFL/Synth09-T0R0-v6"}
     with pytest.warns(UserWarning, match="latest version SAFL/Synth00-T1R1-v6"):

@@ -213,14 +213,15 @@ def prepare_sequences(
     plans = [_plan(source, str(name), f, config, conds, seed, kinds) for name, f in frames.items()]
     todo = [plan for plan in plans if plan.missing]
     serially = parallel is None or parallel.serial
-    for plan in todo:
-        if serially or len(plan.frames) < 2:
-            views = render_views(source, plan.sequence, config, plan.frames, plan.offsets, plan.kinds,
-                                       progress=progress)
-            for c, k in plan.missing:
-                _save(plan.paths[c, k], views[c.name, k], plan.meta[c, k])
-    if parallel is not None and not serially:
-        _build_chunked(source, config, [p for p in todo if len(p.frames) >= 2], parallel, progress)
+    whole = [p for p in todo if len(p.frames) < 2 or (serially and len(p.frames) <= CHUNK_FRAMES)]
+    for plan in whole:
+        views = render_views(source, plan.sequence, config, plan.frames, plan.offsets, plan.kinds,
+                             progress=progress)
+        for c, k in plan.missing:
+            _save(plan.paths[c, k], views[c.name, k], plan.meta[c, k])
+    chunked = [p for p in todo if p not in whole]
+    if chunked:  # on the workers, or in this process for a pass longer than CHUNK_FRAMES
+        _build_chunked(source, config, chunked, parallel or Parallel(), progress)
     return {plan.sequence: plan.paths for plan in plans}
 
 
@@ -234,10 +235,51 @@ def _build_chunk(
     return {key: _compress(value) for key, value in views.items()}
 
 
+#: The most frames one chunk of views holds. A longer pass (the long drive's 20 000 frames, a
+#: 4 541-frame KITTI sequence at every frame) is rendered in chunks of at most this many, serially
+#: as on workers, and each finished chunk is kept on disk (`_parts_dir`) until its pass is
+#: complete, so an interrupted pass resumes from the chunks it finished. A chunk starts from a
+#: fresh local map of the `window` scans before its first frame (`prepare`), so its views are the
+#: serial ones, and reading those scans again costs `window` / `CHUNK_FRAMES` = 1 % more.
+CHUNK_FRAMES = 1000
+
+
+def _parts_dir(plan: _Plan) -> Path:
+    """Where the finished chunks of `plan`'s pass wait: beside its first missing file, named
+    after it (its key covers the source, frames, conditions and seed)."""
+    first = plan.paths[plan.missing[0]]
+    return first.with_name(first.stem + ".parts")
+
+
+def _part_path(plan: _Plan, chunk: np.ndarray) -> Path:
+    return _parts_dir(plan) / f"{int(chunk[0]):06d}-{int(chunk[-1]):06d}.zip"
+
+
+def _keep_part(path: Path, chunk: dict[tuple[str, str], bytes]) -> None:
+    """One finished chunk (its compressed views per (condition, kind)), written atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED, allowZip64=True) as archive:
+            for (label, kind), data in chunk.items():
+                archive.writestr(f"{label}/{kind}.npz", data)
+
+
+def _kept_part(path: Path, needed: Sequence[tuple[str, str]]) -> dict[tuple[str, str], bytes] | None:
+    """The chunk kept at `path` if it holds every (condition, kind) in `needed`, else None."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return {(label, kind): archive.read(f"{label}/{kind}.npz") for label, kind in needed}
+    except (OSError, KeyError, zipfile.BadZipFile):
+        return None
+
+
 def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence[_Plan], parallel: Parallel,
                    progress: bool) -> None:
-    """Render the plans' views in chunks on the workers; write each plan's files (its compressed
-    chunks, in frame order) once all its chunks are in."""
+    """Render the plans' views in chunks, on the workers or in this process (`CHUNK_FRAMES`),
+    keeping each finished chunk on disk; write each plan's files (its compressed chunks, in frame
+    order) once all its chunks are in, then drop the kept chunks."""
+    import shutil
+
     from tqdm import tqdm
 
     if not plans:
@@ -245,44 +287,71 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
     portable = dataclasses.replace(source, _open={})  # open sequences stay in this process
     jobs: list[tuple[Any, ...]] = []
     owner: list[int] = []  # the plan of each job
+    parts: list[Path] = []  # where each job's chunk is kept
+    slot: list[int] = []  # each job's chunk, in frame order over all plans
+    kept: dict[int, dict[int, Any]] = {p: {} for p in range(len(plans))}  # finished before
     # chunks of about equal size over all sequences, a few per worker: enough to balance the
     # load, few enough that re-reading each chunk's first local map stays cheap
     size = max(1, -(-sum(len(plan.frames) for plan in plans) // (3 * parallel.slots())))
+    size = min(size, CHUNK_FRAMES)
+    index = 0
     for p, plan in enumerate(plans):
         n = len(plan.frames)
+        needed = [(c.name, k) for c, k in plan.missing]
         for c in np.array_split(np.arange(n), -(-n // size)):
-            if len(c):
+            if not len(c):
+                continue
+            part = _part_path(plan, c)
+            earlier = _kept_part(part, needed) if part.is_file() else None
+            if earlier is not None:
+                kept[p][index] = earlier
+            else:
                 offsets = {lb: None if o is None else o[c] for lb, o in plan.offsets.items()}
                 jobs.append((portable, plan.sequence, config, plan.frames[c], offsets, plan.kinds))
                 owner.append(p)
+                parts.append(part)
+                slot.append(index)
+            index += 1
     waiting = [owner.count(p) for p in range(len(plans))]
-    chunks: dict[int, dict[int, Any]] = {p: {} for p in range(len(plans))}
+    chunks: dict[int, dict[int, Any]] = kept
     errors: dict[int, str] = {}
     names = ", ".join(plan.sequence for plan in plans)
-    bar = tqdm(total=len(jobs), desc=f"maps {names} ({parallel.describe()})", unit="chunk",
-               disable=not progress, leave=False)
+    resumed = sum(len(k) for k in kept.values())
+    bar = tqdm(total=len(jobs) + resumed, initial=resumed, unit="chunk", disable=not progress,
+               desc=f"maps {names} ({parallel.describe()})", leave=False)
+
+    def finish(p: int) -> None:
+        plan = plans[p]
+        ordered = [chunks[p][j] for j in sorted(chunks[p])]
+        for c, k in plan.missing:
+            _save_parts(plan.paths[c, k], [chunk[c.name, k] for chunk in ordered], plan.meta[c, k])
+        chunks[p].clear()
+        shutil.rmtree(_parts_dir(plan), ignore_errors=True)
 
     def collect(i: int, result: JobResult) -> None:
         bar.update(1)
         p = owner[i]
+        waiting[p] -= 1
         if result.error is not None:
             errors.setdefault(p, result.error)
-        chunks[p][i] = result.value
-        waiting[p] -= 1
+            return
+        if len(plans[p].frames) > CHUNK_FRAMES:  # a long pass: kept until it is complete
+            _keep_part(parts[i], result.value)
+        chunks[p][slot[i]] = result.value
         if waiting[p] == 0 and p not in errors:
-            plan = plans[p]
-            ordered = [chunks[p][j] for j in sorted(chunks[p])]
-            for c, k in plan.missing:
-                _save_parts(plan.paths[c, k], [chunk[c.name, k] for chunk in ordered], plan.meta[c, k])
-            chunks[p].clear()
+            finish(p)
 
+    for p in range(len(plans)):  # every chunk kept from an interrupted pass
+        if waiting[p] == 0:
+            finish(p)
     try:
         run_jobs(_build_chunk, jobs, parallel, on_done=collect)
     finally:
         bar.close()
     if errors:
         p, error = next(iter(sorted(errors.items())))
-        raise DataError(f"building the maps of sequence {plans[p].sequence} failed on a worker: {error}")
+        where = "" if parallel.serial else " on a worker"
+        raise DataError(f"building the maps of sequence {plans[p].sequence} failed{where}: {error}")
 
 
 def load_views(
