@@ -75,6 +75,13 @@ def test_a_long_step_that_reports_nothing_still_prints_lines_in_a_log() -> None:
     assert len(lines) == said and not [t for t in threading.enumerate() if t.name == "safl-heartbeat"]
     with heartbeat(None, "nothing", every_s=0.01):  # no log: no thread, no line
         time.sleep(0.03)
+    from safl_bench.common.progress import report
+
+    lines.clear()
+    with heartbeat(lines.append, "preparing the views", every_s=0.02):
+        report("maps L0: 6 of 20 chunks")  # how far the step got: on its next line
+        time.sleep(0.1)
+    assert lines and lines[-1].endswith(" s; maps L0: 6 of 20 chunks)")
 
 
 def test_train_resolves_a_bare_name_as_run_does(capsys: pytest.CaptureFixture[str]) -> None:

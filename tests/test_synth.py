@@ -327,7 +327,7 @@ def test_a_parked_car_is_seen_through_its_windows() -> None:
 def test_a_streamed_sequence_casts_the_scans_a_written_one_stores(tmp_path, monkeypatch):
     """The long drive's scans are cast on demand (no .bin files), and each equals the scan the
     generator would have written; its poses and times are the written sequence's."""
-    from safl_bench.sources.synth import SynthSource, StreamedSequence
+    from safl_bench.sources.synth import StreamedSequence, SynthSource
     from safl_bench.synth import generate
 
     streamed = tmp_path / "streamed"

@@ -57,6 +57,16 @@ def advance(n: int) -> None:
         progress.advance(n)
 
 
+#: The latest word on the step a `heartbeat` watches ("" when there is none), set by `report`.
+_latest: list[str] = [""]
+
+
+def report(text: str) -> None:
+    """Say how far a long step has got (e.g. "maps L0: 6 of 20 chunks"); the running
+    `heartbeat` adds it to its next line. Cheap, and harmless when no heartbeat runs."""
+    _latest[0] = text
+
+
 @contextmanager
 def heartbeat(say: Callable[[str], None] | None, what: str, every_s: float = 30.0) -> Iterator[None]:
     """While the block runs, `say` "<what>: still working (N s)" every `every_s` seconds, so a
@@ -67,10 +77,12 @@ def heartbeat(say: Callable[[str], None] | None, what: str, every_s: float = 30.
         return
     stop = threading.Event()
     start = time.monotonic()
+    _latest[0] = ""
 
     def beat() -> None:
         while not stop.wait(every_s):
-            say(f"  {what}: still working ({time.monotonic() - start:.0f} s)")
+            latest = f"; {_latest[0]}" if _latest[0] else ""
+            say(f"  {what}: still working ({time.monotonic() - start:.0f} s{latest})")
 
     thread = threading.Thread(target=beat, name="safl-heartbeat", daemon=True)
     thread.start()
@@ -79,6 +91,7 @@ def heartbeat(say: Callable[[str], None] | None, what: str, every_s: float = 30.
     finally:
         stop.set()
         thread.join()
+        _latest[0] = ""
 
 
 def interactive(stream: Any) -> bool:

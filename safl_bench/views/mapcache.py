@@ -31,6 +31,7 @@ import numpy as np
 from safl_bench.common.atomic import atomic_path
 from safl_bench.common.fingerprint import fingerprint, to_jsonable
 from safl_bench.common.parallel import JobResult, Parallel, run_jobs
+from safl_bench.common.progress import report
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.paths import map_cache_dir
 from safl_bench.sources import DataSource
@@ -317,6 +318,7 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
     errors: dict[int, str] = {}
     names = ", ".join(plan.sequence for plan in plans)
     resumed = sum(len(k) for k in kept.values())
+    finished = [resumed]
     bar = tqdm(total=len(jobs) + resumed, initial=resumed, unit="chunk", disable=not progress,
                desc=f"maps {names} ({parallel.describe()})", leave=False)
 
@@ -330,6 +332,8 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
 
     def collect(i: int, result: JobResult) -> None:
         bar.update(1)
+        finished[0] += 1
+        report(f"maps {names}: {finished[0]} of {len(jobs) + resumed} chunks")
         p = owner[i]
         waiting[p] -= 1
         if result.error is not None:
