@@ -294,7 +294,7 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
     # chunks of about equal size over all sequences, a few per worker: enough to balance the
     # load, few enough that re-reading each chunk's first local map stays cheap
     size = max(1, -(-sum(len(plan.frames) for plan in plans) // (3 * parallel.slots())))
-    size = min(size, CHUNK_FRAMES)
+    size = CHUNK_FRAMES if parallel.serial else min(size, CHUNK_FRAMES)  # serially: to resume only
     index = 0
     for p, plan in enumerate(plans):
         n = len(plan.frames)
