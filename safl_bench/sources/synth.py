@@ -128,11 +128,14 @@ def open_streamed(root: Path, name: str, seed: int, version: str) -> StreamedSeq
     checked as KITTI's are (`sources.kitti`)."""
     import json
 
-    from safl_bench.synth.writer import manifest_path
+    from safl_bench.synth.writer import manifest_path, read_manifest
 
     seq_dir = root / "sequences" / name
-    manifest = json.loads(manifest_path(root, name).read_text())
-    frames = int(manifest["frames"])
+    manifest = read_manifest(root, name)
+    if manifest is None or not isinstance(manifest.get("frames"), int):
+        raise DataError(f"{manifest_path(root, name)}: missing or unreadable; regenerate the "
+                        f"sequence (safl-bench data synth {name})")
+    frames = manifest["frames"]
     tr = read_tr(seq_dir / "calib.txt")
     times = read_times(seq_dir / "times.txt", frames)
     camera = read_camera_poses(root / "poses" / f"{name}.txt", frames)

@@ -9,7 +9,6 @@ once in threads (the ray caster releases the GIL) gives the same bytes as one af
 
 from __future__ import annotations
 
-import json
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -140,27 +139,26 @@ def _expected_manifest(name: str, seed: int, config: SynthConfig, version: str) 
         "config": to_jsonable(config),
     }
     if name in STREAMED_SEQUENCES:  # only there, so that the written sequences' manifests stay valid
-        out["scans"] = "cast on demand"
+        out["scans"] = CAST_ON_DEMAND
     return out
+
+
+#: What the manifest of a sequence of `STREAMED_SEQUENCES` says of its scans.
+CAST_ON_DEMAND = "cast on demand"
 
 
 def is_streamed(root: Path, name: str) -> bool:
     """Whether sequence `name` under `root` has its scans cast on demand (its manifest says so)."""
-    try:
-        manifest = json.loads(writer.manifest_path(root, name).read_text())
-    except (OSError, ValueError):
-        return False
-    return manifest.get("scans") == "cast on demand"
+    manifest = writer.read_manifest(root, name)
+    return manifest is not None and manifest.get("scans") == CAST_ON_DEMAND
 
 
 def is_current(root: Path, name: str, seed: int = 0, config: SynthConfig | None = None,
                version: str = GENERATOR_VERSION) -> bool:
     """Whether sequence `name` under `root` is complete and made with these settings."""
     config = config or SynthConfig()
-    path = writer.manifest_path(root, name)
-    try:
-        manifest = json.loads(path.read_text())
-    except (OSError, ValueError):
+    manifest = writer.read_manifest(root, name)
+    if manifest is None:
         return False
     expected = _expected_manifest(name, seed, config, version)
     if any(manifest.get(k) != v for k, v in expected.items()):

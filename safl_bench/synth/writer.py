@@ -12,7 +12,9 @@ Every file goes through `safl_bench.common.atomic`, so an interrupted run leaves
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -49,6 +51,16 @@ def poses_path(root: Path, name: str) -> Path:
 
 def manifest_path(root: Path, name: str) -> Path:
     return sequence_dir(root, name) / MANIFEST_NAME
+
+
+def read_manifest(root: Path, name: str) -> dict[str, Any] | None:
+    """The manifest of sequence `name` under `root`, or None when it is missing or unreadable
+    (the sequence then reads as incomplete)."""
+    try:
+        manifest = json.loads(manifest_path(root, name).read_text())
+    except (OSError, ValueError):
+        return None
+    return manifest if isinstance(manifest, dict) else None
 
 
 def _row(values: np.ndarray) -> str:

@@ -290,7 +290,9 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
     owner: list[int] = []  # the plan of each job
     parts: list[Path] = []  # where each job's chunk is kept
     slot: list[int] = []  # each job's chunk, in frame order over all plans
-    kept: dict[int, dict[int, Any]] = {p: {} for p in range(len(plans))}  # finished before
+    # each plan's finished chunks by their place in frame order: those an interrupted pass kept,
+    # then those the jobs return
+    chunks: dict[int, dict[int, Any]] = {p: {} for p in range(len(plans))}
     # chunks of about equal size over all sequences, a few per worker: enough to balance the
     # load, few enough that re-reading each chunk's first local map stays cheap
     size = max(1, -(-sum(len(plan.frames) for plan in plans) // (3 * parallel.slots())))
@@ -305,7 +307,7 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
             part = _part_path(plan, c)
             earlier = _kept_part(part, needed) if part.is_file() else None
             if earlier is not None:
-                kept[p][index] = earlier
+                chunks[p][index] = earlier
             else:
                 offsets = {lb: None if o is None else o[c] for lb, o in plan.offsets.items()}
                 jobs.append((portable, plan.sequence, config, plan.frames[c], offsets, plan.kinds))
@@ -314,10 +316,9 @@ def _build_chunked(source: DataSource, config: MapConfig | None, plans: Sequence
                 slot.append(index)
             index += 1
     waiting = [owner.count(p) for p in range(len(plans))]
-    chunks: dict[int, dict[int, Any]] = kept
     errors: dict[int, str] = {}
     names = ", ".join(plan.sequence for plan in plans)
-    resumed = sum(len(k) for k in kept.values())
+    resumed = sum(len(c) for c in chunks.values())
     finished = [resumed]
     bar = tqdm(total=len(jobs) + resumed, initial=resumed, unit="chunk", disable=not progress,
                desc=f"maps {names} ({parallel.describe()})", leave=False)
