@@ -53,6 +53,38 @@ def test_blocks_equal_the_whole_matrix(cfg: MatcherConfig, block: int) -> None:
         same(got, whole)
 
 
+@pytest.mark.parametrize("parts", [1, 2, 5])
+@pytest.mark.parametrize("block", [1, 7, 30])
+def test_spans_searched_apart_and_combined_equal_the_whole_matrix(block: int, parts: int) -> None:
+    """What `--workers`/`--ray` spread over the workers: each span of whole blocks, searched on
+    its own (computing its own blocks, reading the rows its trajectories reach beyond it), in
+    any order, joins into the whole matrix's answer bit for bit; every row is visited once."""
+    D = route_matrix(90, 70, seed=2)
+    cfgs = CONFIGS[:3] + CONFIGS[-4:]
+    windows = [16 if c.needs_window else None for c in cfgs]
+    limit = np.clip(np.arange(90) - 5, 0, 70).astype(np.int64)
+    cut = blocks.spans(90, block, parts)
+    assert cut[0][0] == 0 and cut[-1][1] == 90 and len(cut) == min(parts, -(-90 // block))
+    assert all(a % block == 0 and b > a for a, b in cut)
+    seen: list[int] = []
+    found = [blocks.search_span(lambda a, b: D[a:b], 90, 70, cfgs, span, db_limit=limit,
+                                windows=windows, block=block,
+                                visit=lambda a, rows: seen.extend(range(a, a + len(rows))))
+             for span in reversed(cut)]
+    got, _ = blocks.combine(cfgs, found, 90, 70, windows=windows)
+    for cfg, window, result in zip(cfgs, windows, got, strict=True):
+        same(result, match(D, cfg, db_limit=limit, enhance_window=window))
+    assert sorted(seen) == list(range(90))
+    with pytest.raises(DataError, match="gap or overlap at query 0 of 90"):
+        blocks.combine(cfgs, found[:-1], 90, 70, windows=windows)
+    with pytest.raises(DataError, match="gap or overlap"):
+        blocks.combine(cfgs, [*found, found[0]], 90, 70, windows=windows)
+    if block > 1:
+        with pytest.raises(ConfigError, match=r"query span \[1, 5\) is not whole blocks"):
+            blocks.search_span(lambda a, b: D[a:b], 90, 70, cfgs, (1, 5), block=block,
+                               windows=windows)
+
+
 def test_several_settings_share_the_rows_and_visit_sees_each_once() -> None:
     D = route_matrix(50, 40, seed=1)
     seen: list[tuple[int, int]] = []

@@ -57,6 +57,38 @@ def test_local_workers_give_the_serial_records(grid, kitti_root, tmp_path):
     assert {o.status for o in again} == {"reused"}
 
 
+def test_one_cell_spreads_its_describing_and_matching_over_the_workers(grid, kitti_root, tmp_path,
+                                                                      monkeypatch):
+    """A grid of fewer cells than workers (the long drive is one cell) is evaluated here, its
+    describing in chunks and the exact matcher's query spans on the workers: the serial
+    record, field for field, and the record says where it ran."""
+    from safl_bench.common import parallel as parallel_module
+    from safl_bench.evaluation import cell as cell_module
+
+    monkeypatch.setattr(cell_module, "SPREAD_FRAMES", 1)  # the tiny cell's 24 views spread
+    monkeypatch.setenv("SAFL_BLOCK_MB", "0.0001")  # one query row a block: 12 blocks, 4 spans
+    calls: list[str] = []
+
+    real_run = parallel_module.run_jobs
+
+    def counted(fn, jobs, par, **kw):
+        calls.append(f"{fn.__name__} x{len(jobs)}")
+        return real_run(fn, jobs, par, **kw)
+
+    monkeypatch.setattr(parallel_module, "run_jobs", counted)
+    sad = make_method("sad")
+    one = grid[:1]
+    serial = runner.run_cells(sad, one, options(kitti_root, tmp_path / "serial"))
+    assert calls == []
+    par = runner.run_cells(sad, one, options(kitti_root, tmp_path / "par"), parallel=Parallel(workers=2))
+    assert _results(serial) == _results(par)
+    # database, then queries, in chunks of 3 views (two a worker); the matcher in 4 spans
+    assert calls == ["_describe_job x4", "_describe_job x4", "_span_job x4"]
+    record = par[0].record
+    assert record is not None and "describing and matching spread over 2 local worker processes" \
+        in record.timings.how_run
+
+
 def test_a_grid_of_methods_and_seeds_is_one_queue_with_the_serial_records(grid, kitti_root, tmp_path):
     methods = [make_method("sad"), KillOnMarker()]  # no marker: a plain row/column profile
     serial = runner.run_grid(methods, grid[:2], options(kitti_root, tmp_path / "serial"), seeds=[0, 5])
@@ -182,10 +214,13 @@ def test_chunked_map_building_gives_the_serial_maps(kitti_copy, safl_home):
     assert all(path.stat().st_mtime_ns == t for path, t in stamps.items())  # reused, not rebuilt
 
 
-def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_path):
-    """A local Ray cluster started here (2 CPUs) runs the grid to the serial run's records; a
-    Ray worker killed mid-cell fails its own cell only, leaves no partial record, and the rerun
-    completes the grid."""
+def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_path, monkeypatch):
+    """A local Ray cluster started here (2 CPUs) runs the grid to the serial run's records, and
+    one cell alone with its describing and matching spread over the cluster to the same
+    record; a Ray worker killed mid-cell fails its own cell only, leaves no partial record, and
+    the rerun completes the grid."""
+    from safl_bench.evaluation import cell as cell_module
+
     ray = pytest.importorskip("ray")
     here = str(Path(__file__).parent)  # the workers import parallel_methods from here
     path = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH", "")) if p)
@@ -198,6 +233,14 @@ def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_p
         assert _results(serial) == _results(par)
         assert par[0].record is not None and par[0].record.timings.how_run.startswith(
             "evaluated on Ray cluster (auto); timed afterwards in the main process")
+        with monkeypatch.context() as m:
+            m.setattr(cell_module, "SPREAD_FRAMES", 1)
+            m.setenv("SAFL_BLOCK_MB", "0.0001")
+            one = runner.run_cells(sad, grid[:1], options(kitti_root, tmp_path / "ray-one"),
+                                   parallel=Parallel(ray_address="auto"))
+        assert _results(one) == _results(serial[:1])
+        assert one[0].record is not None and "spread over Ray cluster (auto)" in \
+            one[0].record.timings.how_run
 
         marker = tmp_path / "kill"
         marker.write_text("")

@@ -31,6 +31,7 @@ from typing import Any, cast
 import numpy as np
 
 from safl_bench.common import progress
+from safl_bench.common.parallel import Parallel
 from safl_bench.errors import ConfigError, DataError
 from safl_bench.evaluation.groundtruth import EXCLUDED, TP, GroundTruth
 from safl_bench.evaluation.metrics import (
@@ -98,24 +99,55 @@ def score_matches(truth: GroundTruth, result: MatchResult) -> Metrics:
     return evaluate_outcomes(match_outcomes(truth, result))
 
 
-def describe(method: Method, views: Any) -> tuple[np.ndarray, float]:
+def describe(method: Method, views: Any, parallel: Parallel | None = None
+             ) -> tuple[np.ndarray, float]:
     """(descriptors, seconds of describing them): through the descriptor cache for methods that
     ask for it (`Method.cache_descriptors`; the seconds are then those measured when each view was
     described), else directly. Through the cache describing is checkpointed in chunks (an
     interrupted cell resumes from its last chunk) and the cell's progress counts each chunk
     (`safl_bench.common.progress`); a method without the cache describes in one call, its
     frames counted when it returns (chunking it would change its batching, and nothing would
-    keep the chunks)."""
+    keep the chunks).
+
+    `parallel` (local workers or a Ray cluster) spreads a cell's describing over its slots when
+    it has at least `SPREAD_FRAMES` views: chunks of views described on the workers
+    (`spread_describe`), through the cache too. The seconds are then the workers' own, summed
+    (so frames per second stays one process's speed, comparable with a serial run)."""
+    spread = _spreads(parallel, len(views))
     if getattr(method, "cache_descriptors", False) and method.input_kind == "topview":
         from safl_bench.methods.descriptor_cache import cached_describe
 
-        desc, per_frame, _ = cached_describe(method, views)
+        desc, per_frame, _ = (cached_describe(method, views, parallel=parallel) if spread
+                              else cached_describe(method, views))
         return desc, per_frame * len(desc)
+    if spread and parallel is not None:
+        return spread_describe(method, views, parallel)
     t0 = time.perf_counter()
     desc = method.describe(views)
     seconds = time.perf_counter() - t0
     progress.advance(len(views))
     return desc, seconds
+
+
+#: A cell's describing is spread over the workers (`describe`'s `parallel`) from this many
+#: views on: below it a pool's start-up costs more than it saves.
+SPREAD_FRAMES = 2048
+
+
+def _spreads(parallel: Parallel | None, n: int) -> bool:
+    return parallel is not None and not parallel.serial and n >= SPREAD_FRAMES
+
+
+def spread_describe(method: Method, views: Any, parallel: Parallel) -> tuple[np.ndarray, float]:
+    """`method.describe` of `views` in chunks on `parallel`'s workers (`describe_chunks`),
+    concatenated in order; the seconds are the workers' own, summed. The descriptors are those
+    of one call for methods that describe each view independently of its batch (what
+    `safl_bench.methods.check` tests, and the descriptor cache assumes)."""
+    from safl_bench.methods.descriptor_cache import describe_chunks
+
+    pieces = describe_chunks(method, views, parallel)
+    desc = np.concatenate([p[0] for p in pieces]) if pieces else method.describe(views)
+    return desc, float(sum(p[1] for p in pieces))
 
 
 DatabaseMemo = dict[tuple[int, str], tuple[np.ndarray, float]]
@@ -131,19 +163,19 @@ def views_digest(views: Any) -> str:
     return digest.hexdigest()
 
 
-def describe_database(method: Method, database: Any,
-                      memo: DatabaseMemo | None = None) -> tuple[np.ndarray, float]:
+def describe_database(method: Method, database: Any, memo: DatabaseMemo | None = None,
+                      parallel: Parallel | None = None) -> tuple[np.ndarray, float]:
     """`describe` of the database views, through `memo` when given: the seeds of a cell (and the
     paper conditions of one sequence) share their clean database views, so they are described
     once per process and method, and the seconds are those measured then. Views that are not one
     array (point lists) are described each time."""
     if memo is None or not isinstance(database, np.ndarray):
-        return describe(method, database)
+        return describe(method, database, parallel)
     key = (id(method), views_digest(database))
     if key not in memo:
         if len(memo) >= _MEMO_LIMIT:
             memo.pop(next(iter(memo)))
-        memo[key] = describe(method, database)
+        memo[key] = describe(method, database, parallel)
     else:
         progress.advance(len(database))
     return memo[key]
@@ -165,13 +197,14 @@ def compare(method: Method, a: np.ndarray, b: np.ndarray, distance: str = "metho
     return D
 
 
-def describe_pair(method: Method, queries: Any, database: Any, memo: DatabaseMemo | None = None
-                  ) -> tuple[np.ndarray, np.ndarray, float, int]:
+def describe_pair(method: Method, queries: Any, database: Any, memo: DatabaseMemo | None = None,
+                  parallel: Parallel | None = None) -> tuple[np.ndarray, np.ndarray, float, int]:
     """(query descriptors, database descriptors, seconds spent describing, frames described).
-    `memo`: database descriptors described before in this process (`describe_database`)."""
+    `memo`: database descriptors described before in this process (`describe_database`);
+    `parallel`: workers to spread a large side's describing over (`describe`)."""
     progress.expect(len(queries) + len(database))
-    d_db, s_db = describe_database(method, database, memo)
-    d_q, s_q = describe(method, queries)
+    d_db, s_db = describe_database(method, database, memo, parallel)
+    d_q, s_q = describe(method, queries, parallel)
     return d_q, d_db, s_db + s_q, len(d_db) + len(d_q)
 
 
@@ -220,13 +253,17 @@ def evaluate_method(
     memo: DatabaseMemo | None = None,
     context: int = 0,
     block_mb: float | None = None,
+    parallel: Parallel | None = None,
 ) -> Evaluation:
     """Run `method` on one task's views and score both matching modes (`config.max_frames`
     limits both sides first; `context`, the task's `TaskSpec.context_queries`, and
     `config.trim_queries` leave queries out of the metrics, not out of the matches: see
     `scored_queries`). `memo`: database descriptors to reuse (`describe_database`).
     `block_mb`: the memory budget of the difference matrix's query blocks
-    (`safl_bench.matching.blocks.block_mb`; no result depends on it)."""
+    (`safl_bench.matching.blocks.block_mb`; no result depends on it). `parallel`: local
+    workers or a Ray cluster to spread this one cell over: its describing (`describe`) and,
+    when the difference matrix takes more than one block, the exact matcher's query spans
+    (`blocks.spans`, each searched on a worker); no result depends on it either."""
     cfg = config or EvaluationConfig()
     if cfg.max_frames is not None:
         queries, database = queries[:cfg.max_frames], database[:cfg.max_frames]
@@ -234,7 +271,7 @@ def evaluate_method(
     if is_retrieval(method):
         return evaluate_retrieval(method, queries, database, truth, config=cfg, revisit=revisit,
                                   context=context)
-    d_q, d_db, describe_s, n = describe_pair(method, queries, database, memo)
+    d_q, d_db, describe_s, n = describe_pair(method, queries, database, memo, parallel)
     limit = truth.db_limit() if revisit else None
     window: WindowChoice | None = None
     t0 = time.perf_counter()
@@ -262,7 +299,7 @@ def evaluate_method(
                                                       limit, part, scored)
     else:
         results, seconds = _exact(method, d_q, d_db, cfg, configs, windows, limit, block_mb,
-                                  rank_rows)
+                                  rank_rows, parallel, ranks, part, scored)
     matches = dict(zip(MODES, results, strict=True))
     per_query = {mode: match_outcomes(part, subset_result(matches[mode], scored),
                                       ranks if mode == "single_frame" else None)
@@ -274,12 +311,21 @@ def evaluate_method(
 
 def _exact(method: Method, d_q: np.ndarray, d_db: np.ndarray, cfg: EvaluationConfig,
            configs: list[MatcherConfig], windows: list[int | None], limit: np.ndarray | None,
-           block_mb: float | None, visit: Any) -> tuple[list[MatchResult], list[float]]:
+           block_mb: float | None, visit: Any, parallel: Parallel | None = None,
+           ranks: np.ndarray | None = None, part: GroundTruth | None = None,
+           scored: slice | None = None) -> tuple[list[MatchResult], list[float]]:
     """Both modes by the exact matcher, the difference matrix in query blocks
-    (`safl_bench.matching.blocks`), or whole for a distance that is not row-wise."""
+    (`safl_bench.matching.blocks`), or whole for a distance that is not row-wise. With
+    `parallel` and more than one block, the query spans are searched on its workers
+    (`_spread_exact`), and the true places' ranks of the scored queries land in `ranks`."""
     nq, ndb = len(d_q), len(d_db)
     step = blocks.block_rows(nq, ndb, block_mb)
-    if step >= nq or getattr(method, "rowwise_distance", True):
+    rowwise = getattr(method, "rowwise_distance", True)
+    if (parallel is not None and not parallel.serial and step < nq and rowwise
+            and ranks is not None and part is not None and scored is not None):
+        return _spread_exact(method, d_q, d_db, cfg, configs, windows, limit, step, parallel,
+                             ranks, part, scored)
+    if step >= nq or rowwise:
         def rows(a: int, b: int) -> np.ndarray:
             return compare(method, d_q[a:b], d_db, cfg.distance)
     else:
@@ -291,6 +337,67 @@ def _exact(method: Method, d_q: np.ndarray, d_db: np.ndarray, cfg: EvaluationCon
             return D[a:b]
     return blocks.match_rows(rows, nq, ndb, configs, db_limit=limit, block=step, visit=visit,
                              windows=windows)
+
+
+def _spread_exact(method: Method, d_q: np.ndarray, d_db: np.ndarray, cfg: EvaluationConfig,
+                  configs: list[MatcherConfig], windows: list[int | None],
+                  limit: np.ndarray | None, step: int, parallel: Parallel, ranks: np.ndarray,
+                  part: GroundTruth, scored: slice) -> tuple[list[MatchResult], list[float]]:
+    """The exact matcher with its query spans (`blocks.spans`, whole blocks of `step` rows, one
+    or more per slot) searched on `parallel`'s workers, each span computing its own blocks of
+    the difference matrix (`_span_job`): the same blocks, so the same numbers, as the serial
+    pass; `blocks.combine` joins them. Each worker holds one block's rows at a time, so the
+    memory budget (`--block-mb`) is per worker."""
+    from safl_bench.common.parallel import run_jobs
+
+    nq = len(d_q)
+    start, stop = int(scored.start), int(scored.stop)
+    limits = blocks.db_limits(limit, nq, len(d_db))
+    reach = [c.u_range() for c in configs]
+    u_lo, u_hi = min(u for u, _ in reach), max(u for _, u in reach)
+    jobs = []
+    for first, last in blocks.spans(nq, step, 2 * parallel.slots()):
+        lo = max(0, first + u_lo) // step * step  # the blocks this span computes
+        hi = min(nq, -(-min(nq, last + u_hi) // step) * step)
+        truths = [part.true_matches(i - start) for i in range(max(first, start), min(last, stop))]
+        jobs.append((method, cfg.distance, d_q[lo:hi], lo, d_db, configs, windows, limits, step,
+                     (first, last), nq, truths, start, stop, cfg.single_frame.dtype))
+    done = run_jobs(_span_job, jobs, parallel)
+    failed = [r.error for r in done if r.error is not None]
+    if failed:
+        raise DataError(f"the exact matcher's query spans failed on the workers: {failed[0]}")
+    spans = []
+    for (span, span_ranks) in (r.value for r in done):
+        spans.append(span)
+        a, b = max(span.first, start), min(span.stop, stop)
+        if b > a:
+            ranks[a - start:b - start] = span_ranks
+    return blocks.combine(configs, spans, nq, len(d_db), windows=windows)
+
+
+def _span_job(method: Method, distance: str, d_q: np.ndarray, offset: int, d_db: np.ndarray,
+              configs: list[MatcherConfig], windows: list[int | None], limit: np.ndarray,
+              step: int, span: tuple[int, int], nq: int, truths: list[np.ndarray], start: int,
+              stop: int, dtype: str) -> tuple[blocks.SpanResult, np.ndarray]:
+    """One worker's query span (`_spread_exact`): `d_q` holds query rows ``[offset, ...)``
+    (the blocks the span reads); the span's result and the single-frame ranks of its scored
+    queries (``[max(first, start), min(last, stop))``, their true places `truths`)."""
+    first, last = span
+    a0, b0 = max(first, start), min(last, stop)
+    out = np.zeros(max(b0 - a0, 0), np.int64)
+
+    def rows(a: int, b: int) -> np.ndarray:
+        return compare(method, d_q[a - offset:b - offset], d_db, distance)
+
+    def rank_rows(a: int, raw: np.ndarray) -> None:
+        lo, hi = max(a, a0), min(a + len(raw), b0)
+        if hi > lo:
+            out[lo - a0:hi - a0] = true_place_ranks(
+                raw[lo - a:hi - a], truths[lo - a0:hi - a0], db_limit=limit[lo:hi], dtype=dtype)
+
+    result = blocks.search_span(rows, nq, len(d_db), configs, span, db_limit=limit,
+                                windows=windows, block=step, visit=rank_rows)
+    return result, out
 
 
 def check_candidates(method: Any, cfg: EvaluationConfig) -> None:

@@ -35,10 +35,21 @@ for the 1024-row one; matches are still the same for the same budget, run after 
 block so that this stays under a budget (`DEFAULT_BLOCK_MB`, or ``SAFL_BLOCK_MB``, or the
 ``--block-mb`` option of ``safl-bench run``): peak memory grows with Ndb (one row), not with
 Nq x Ndb. The budget changes no result: it is not a matcher setting and records do not carry it.
+
+Spread over workers. The queries can also be cut into spans of whole blocks (`spans`), each
+searched on its own (`search_span`, on a worker) and joined (`combine`). A span computes the
+blocks that hold its rows and the rows its trajectories reach before and after it, whole, as
+the serial pass computes them (so the same numbers; a neighbour's block is computed twice,
+which costs one block of distances per span), keeps only the rows it reads, and reports the
+minimum of its own rows. Each query is searched by exactly one span on the same rows, and the
+shift is the minimum of the spans' minima, so the joined result is the serial one bit for bit
+(`match_rows` is the one-span case). Each worker holds one span's rows: the budget is per
+worker.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -114,6 +125,20 @@ class _Stream:
     seconds: float = 0.0
 
 
+@dataclass
+class SpanResult:
+    """What searching the queries of one span `[first, stop)` gave, per matcher setting: the
+    search's outputs (before the shift), the minimum of the span's enhanced rows (the shift is
+    the minimum over all spans) and the seconds spent enhancing and searching. Plain arrays and
+    numbers, so a worker can send it back (`match_spread`)."""
+
+    first: int
+    stop: int
+    found: list[tuple[np.ndarray, ...]]
+    minima: list[float]
+    seconds: list[float]
+
+
 def match_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_database: int,
                configs: Sequence[MatcherConfig], *, db_limit: np.ndarray | None = None,
                windows: Sequence[int | None] | None = None, block: int | None = None,
@@ -125,50 +150,130 @@ def match_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_databas
     `visit(a, D_rows)` sees every block of raw rows once (for measures read from them, as the
     true places' ranks). Returns the results (bit for bit `matcher.match`'s on the whole matrix)
     and, per setting, the seconds spent enhancing and searching (not computing the rows)."""
+    nq, ndb = _shape(n_queries, n_database)
+    step = _step(nq, ndb, block)
+    span = search_span(rows, nq, ndb, configs, (0, nq), db_limit=db_limit, windows=windows,
+                       block=step, visit=visit)
+    return combine(configs, [span], nq, ndb, windows=windows)
+
+
+def _shape(n_queries: int, n_database: int) -> tuple[int, int]:
     nq, ndb = int(n_queries), int(n_database)
     if nq < 1 or ndb < 1:
         raise DataError(f"difference matrix is empty (shape ({nq}, {ndb}))")
+    return nq, ndb
+
+
+def _step(nq: int, ndb: int, block: int | None) -> int:
     step = block_rows(nq, ndb) if block is None else block
     if not isinstance(step, int | np.integer) or isinstance(step, bool) or step < 1:
         raise ConfigError(f"block size must be a whole number of query rows >= 1, got {block!r}")
-    limit = db_limits(db_limit, nq, ndb)
+    return int(step)
+
+
+def _windows(configs: Sequence[MatcherConfig], windows: Sequence[int | None] | None) -> list[int]:
     given = list(windows) if windows is not None else [None] * len(configs)
     if len(given) != len(configs):
         raise ConfigError(f"{len(configs)} matcher settings but {len(given)} windows")
-    streams = [_Stream(c, window_of(c, w), np.empty((0, ndb), _DTYPES[c.dtype]))
-               for c, w in zip(configs, given, strict=True)]
-    found = [[np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int64),
-              np.empty(0, np.int64)] for _ in streams]
-    parts: list[list[tuple[np.ndarray, ...]]] = [[] for _ in streams]
-    for a in range(0, nq, int(step)):
-        b = min(a + int(step), nq)
+    return [window_of(c, w) for c, w in zip(configs, given, strict=True)]
+
+
+def spans(n_queries: int, block: int, parts: int) -> list[tuple[int, int]]:
+    """`[0, n_queries)` cut into at most `parts` contiguous spans of whole blocks of `block`
+    rows (the last block may be shorter), as even as whole blocks allow: the spans that
+    `match_spread` searches apart. Cut on block boundaries so that each span computes the very
+    blocks the serial pass computes."""
+    n_blocks = -(-int(n_queries) // int(block))
+    k = max(1, min(int(parts), n_blocks))
+    edges = [round(i * n_blocks / k) * int(block) for i in range(k + 1)]
+    edges[-1] = int(n_queries)
+    return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
+
+
+def search_span(rows: Callable[[int, int], np.ndarray], n_queries: int, n_database: int,
+                configs: Sequence[MatcherConfig], span: tuple[int, int], *,
+                db_limit: np.ndarray | None = None, windows: Sequence[int | None] | None = None,
+                block: int | None = None, visit: Callable[[int, np.ndarray], None] | None = None,
+                ) -> SpanResult:
+    """Search the queries of `span` ``[first, stop)`` of the whole matrix: the blocks of `block`
+    rows (counted from row 0, as the serial pass cuts them) that hold the span's rows and the
+    rows its trajectories reach before and after it, each block computed whole by `rows` (so
+    its numbers are the serial pass's), its rows outside that reach dropped before enhancing.
+    `visit` sees the span's own raw rows. `first` must start a block (`spans` cuts so)."""
+    nq, ndb = _shape(n_queries, n_database)
+    step = _step(nq, ndb, block)
+    first, stop = int(span[0]), int(span[1])
+    if not (0 <= first < stop <= nq) or first % step:
+        raise ConfigError(f"query span [{first}, {stop}) is not whole blocks of {step} rows "
+                          f"within the {nq} queries")
+    limit = db_limits(db_limit, nq, ndb)
+    # the rows each setting's queries of the span read: [first + u_lo, stop + u_hi)
+    reach = [(max(0, first + u_lo), min(nq, stop + u_hi)) for u_lo, u_hi in
+             (c.u_range() for c in configs)]
+    lo, hi = min(r[0] for r in reach), max(r[1] for r in reach)
+    streams = [_Stream(c, w, np.empty((0, ndb), _DTYPES[c.dtype]), lo=r[0], next_query=first)
+               for c, w, r in zip(configs, _windows(configs, windows), reach, strict=True)]
+    found: list[list[tuple[np.ndarray, ...]]] = [[] for _ in streams]
+    for a in range(lo - lo % step, hi, step):
+        b = min(a + step, nq)
         raw = np.asarray(rows(a, b))
         if raw.shape != (b - a, ndb):
             raise DataError(f"rows {a}..{b - 1} of the difference matrix have shape {raw.shape}, "
                             f"expected ({b - a}, {ndb})")
-        if visit is not None:
-            visit(a, raw)
-        for s, out in zip(streams, parts, strict=True):
+        own = raw[max(a, first) - a:min(b, stop) - a]
+        if visit is not None and len(own):
+            visit(max(a, first), own)
+        for s, out, (r_lo, r_hi) in zip(streams, found, reach, strict=True):
+            r0, r1 = max(a, r_lo), min(b, r_hi)  # the block's rows this setting reads
+            if r1 <= r0:
+                continue
             t0 = time.perf_counter()
             try:
-                arr = _as_difference(raw, _DTYPES[s.cfg.dtype])
+                arr = _as_difference(raw[r0 - a:r1 - a], _DTYPES[s.cfg.dtype])
             except DataError as exc:
                 raise DataError(f"rows {a}..{b - 1}: {exc}") from None
-            out.append(_advance(s, arr, a, b, nq, limit))
+            out.append(_advance(s, arr, r0, r1, nq, limit, (first, stop)))
             s.seconds += time.perf_counter() - t0
-    results = []
-    for s, out, empty in zip(streams, parts, found, strict=True):
-        cols = [np.concatenate([p[k] for p in out]) if out else empty[k] for k in range(5)]
-        shift = float(s.minimum) if s.cfg.shift else 0.0
-        results.append(finish(s.cfg, (cols[0], cols[1], cols[2], cols[3], cols[4]), shift, ndb,
-                              s.window))
-    return results, [s.seconds for s in streams]
+    return SpanResult(first, stop, [_joined(out) for out in found],
+                      [s.minimum for s in streams], [s.seconds for s in streams])
+
+
+def _joined(parts: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
+    empty = (np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int64),
+             np.empty(0, np.int64))
+    return tuple(np.concatenate([p[k] for p in parts]) if parts else empty[k] for k in range(5))
+
+
+def combine(configs: Sequence[MatcherConfig], parts: Sequence[SpanResult], n_queries: int,
+            n_database: int, *, windows: Sequence[int | None] | None = None,
+            ) -> tuple[list[MatchResult], list[float]]:
+    """The results of the spans `parts`, which must cover the `n_queries` queries once, in any
+    order: each setting's outputs in query order, shifted by the minimum over all spans (module
+    doc, 3), and its seconds summed."""
+    ordered = sorted(parts, key=lambda p: p.first)
+    at = 0
+    for p in ordered:
+        if p.first != at:
+            break
+        at = p.stop
+    if at != n_queries or len({p.first for p in ordered}) < len(ordered):
+        raise DataError(f"the query spans leave a gap or overlap at query {at} of {n_queries}")
+    results, seconds = [], []
+    for k, (cfg, window) in enumerate(zip(configs, _windows(configs, windows), strict=True)):
+        cols = _joined([p.found[k] for p in ordered])
+        shift = float(min(p.minima[k] for p in ordered)) if cfg.shift else 0.0
+        results.append(finish(cfg, (cols[0], cols[1], cols[2], cols[3], cols[4]), shift,
+                              int(n_database), window))
+        seconds.append(float(sum(p.seconds[k] for p in ordered)))
+    return results, seconds
 
 
 def _advance(s: _Stream, arr: np.ndarray, a: int, b: int, nq: int,
-             limit: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Add rows [a, b) to `s`, search every query whose rows are now all there, drop the rows
-    no later query reads; the search's outputs for those queries."""
+             limit: np.ndarray, span: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """Add rows [a, b) to `s`, search every query of `span` whose rows are now all there, drop
+    the rows no later query reads; the search's outputs for those queries. The minimum counts
+    the span's own rows only (each row of the matrix belongs to one span)."""
+    first, stop = span
     u_lo, u_hi = s.cfg.u_range()
     keep = s.rows
     w = s.window
@@ -182,15 +287,16 @@ def _advance(s: _Stream, arr: np.ndarray, a: int, b: int, nq: int,
             _enhance_kernel(arr, held[len(keep):], before, after)
         else:
             held[len(keep):] = arr
-    if s.cfg.shift:
-        s.minimum = min(s.minimum, float(held[len(keep):].min()))
-    end = nq if b == nq else max(s.next_query, b - u_hi)
+    if s.cfg.shift and min(b, stop) > max(a, first):
+        new = held[len(keep):]
+        s.minimum = min(s.minimum, float(new[max(a, first) - a:min(b, stop) - a].min()))
+    end = stop if b >= min(nq, stop + u_hi) else min(stop, max(s.next_query, b - u_hi))
     q0, nqb = s.next_query, end - s.next_query
     result = search(held, s.cfg, limit, q0, nqb, s.lo, nq) if nqb > 0 else (
         np.empty(0, np.int64), np.empty(0), np.empty(0), np.empty(0, np.int64),
         np.empty(0, np.int64))
-    s.next_query = end
-    first = max(0, end + u_lo)  # the first row a query not yet searched reads
-    s.rows = held[first - s.lo:].copy() if first > s.lo else held
-    s.lo = max(s.lo, first)
+    s.next_query = max(s.next_query, end)
+    first_read = max(0, s.next_query + u_lo)  # the first row a query not yet searched reads
+    s.rows = held[first_read - s.lo:].copy() if first_read > s.lo else held
+    s.lo = max(s.lo, first_read)
     return result

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +40,7 @@ import numpy as np
 from safl_bench.common import progress
 from safl_bench.common.atomic import atomic_path
 from safl_bench.common.fingerprint import fingerprint
+from safl_bench.common.parallel import Parallel
 from safl_bench.methods.method import Method
 from safl_bench.paths import home
 
@@ -105,8 +107,45 @@ CHUNKING = Chunking()
 """The chunks of every cached describe (`cached_describe`'s default)."""
 
 
-def cached_describe(method: Method, views: Any,
-                    chunking: Chunking | None = None) -> tuple[np.ndarray, float, int]:
+def _describe_job(method: Method, views: np.ndarray) -> tuple[np.ndarray, float]:
+    """One chunk on a worker: its descriptors (float32) and the seconds they took there."""
+    t0 = time.perf_counter()
+    desc = np.asarray(method.describe(views), dtype=np.float32)
+    return desc, time.perf_counter() - t0
+
+
+def describe_chunks(method: Method, views: Any, parallel: Parallel,
+                    on_chunk: Callable[[np.ndarray, np.ndarray, float], None] | None = None,
+                    ) -> list[tuple[np.ndarray, float]]:
+    """`method.describe` of `views` in chunks on `parallel`'s workers: (descriptors, seconds)
+    per chunk, in the views' order. Chunks of at most `CHUNKING.most` frames, at least two per
+    slot (so a slow worker does not hold the rest back). `on_chunk(positions, descriptors,
+    seconds)` runs here as each chunk comes back (the cache writes its shard there); each
+    chunk's frames go to the cell's progress. A chunk that fails stops the describe with its
+    worker's error (a DataError)."""
+    from safl_bench.common.parallel import run_jobs
+    from safl_bench.errors import DataError
+
+    views = np.asarray(views)
+    n = len(views)
+    size = max(1, min(CHUNKING.most, -(-n // (2 * parallel.slots()))))
+    cuts = [np.arange(a, min(a + size, n)) for a in range(0, n, size)]
+
+    def done(i: int, result: Any) -> None:
+        if result.error is None:
+            if on_chunk is not None:
+                on_chunk(cuts[i], result.value[0], result.value[1])
+            progress.advance(len(cuts[i]))
+
+    results = run_jobs(_describe_job, [(method, views[c]) for c in cuts], parallel, on_done=done)
+    failed = [r.error for r in results if r.error is not None]
+    if failed:
+        raise DataError(f"method {method.name!r}: describing failed on a worker: {failed[0]}")
+    return [r.value for r in results]
+
+
+def cached_describe(method: Method, views: Any, chunking: Chunking | None = None,
+                    parallel: Parallel | None = None) -> tuple[np.ndarray, float, int]:
     """Descriptors of `views` (N, H, W) through the cache: (descriptors, seconds per frame as
     measured when they were described, frames described now).
 
@@ -114,7 +153,8 @@ def cached_describe(method: Method, views: Any,
     written as a shard as soon as it is done: an interrupt loses at most the chunk in progress,
     and calling again describes only the rest (module docstring). Reports the frames to the
     cell's progress (`safl_bench.common.progress`): those read from the cache at once, then
-    each chunk as it is written."""
+    each chunk as it is written. With `parallel`, the missing views are described on its
+    workers instead (`describe_chunks`), each chunk written as a shard as it comes back."""
     views = np.asarray(views)
     policy = chunking or CHUNKING
     folder = cache_dir(method)
@@ -131,15 +171,25 @@ def cached_describe(method: Method, views: Any,
         out[hit] = np.stack(rows)
     progress.advance(len(rows))
     start, size = 0, policy.first
+    if parallel is not None and len(missing):
+        def keep(at: np.ndarray, fresh: np.ndarray, seconds: float) -> None:
+            nonlocal out, total
+            chunk = missing[at]
+            cost = seconds / len(chunk)
+            _write_shard(folder, keys[chunk], fresh, cost)
+            if out is None:
+                out = np.empty((len(views), fresh.shape[1]), dtype=np.float32)
+            out[chunk] = fresh
+            total += cost * len(chunk)
+
+        describe_chunks(method, views[missing], parallel, keep)
+        start = len(missing)
     while start < len(missing):
         chunk = missing[start:start + size]
         t0 = time.perf_counter()
         fresh = np.asarray(method.describe(views[chunk]), dtype=np.float32)
         cost_now = (time.perf_counter() - t0) / len(chunk)
-        name = hashlib.sha256(keys[chunk].tobytes()).hexdigest()[:16]
-        with atomic_path(folder / f"shard-{name}.npz") as tmp:
-            np.savez(tmp, keys=keys[chunk], descriptors=fresh,
-                     seconds_per_frame=np.float64(cost_now))
+        _write_shard(folder, keys[chunk], fresh, cost_now)
         if out is None:
             out = np.empty((len(views), fresh.shape[1]), dtype=np.float32)
         out[chunk] = fresh
@@ -150,3 +200,10 @@ def cached_describe(method: Method, views: Any,
     if out is None:  # no views at all
         out = np.asarray(method.describe(views), dtype=np.float32)
     return out, total / max(len(views), 1), len(missing)
+
+
+def _write_shard(folder: Path, keys: np.ndarray, descriptors: np.ndarray, cost: float) -> None:
+    """One chunk's shard, written atomically under the digest of its keys."""
+    name = hashlib.sha256(keys.tobytes()).hexdigest()[:16]
+    with atomic_path(folder / f"shard-{name}.npz") as tmp:
+        np.savez(tmp, keys=keys, descriptors=descriptors, seconds_per_frame=np.float64(cost))

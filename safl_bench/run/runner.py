@@ -303,8 +303,19 @@ def evaluate_cell(method: Method, registered: TaskSpec, seed: int, options: RunO
                      where)
 
 
+def _spread(parallel: Parallel | None, n_cells: int) -> Parallel | None:
+    """`parallel` when a grid has fewer cells to evaluate than it has slots (the long drive is
+    one cell): then each cell is evaluated in this process, its describing and exact matching
+    spread over the workers (`evaluate_method`'s `parallel`), instead of one worker doing the
+    whole cell while the others idle. None otherwise: the cells themselves are the jobs."""
+    if parallel is None or parallel.serial or n_cells == 0 or n_cells >= parallel.slots():
+        return None
+    return parallel
+
+
 def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOptions,
-              where: str, memo: DatabaseMemo | None = None) -> EvaluatedCell:
+              where: str, memo: DatabaseMemo | None = None,
+              parallel: Parallel | None = None) -> EvaluatedCell:
     kind = view_kind(method, task)
     task.prepare([kind])
     queries, database = task.queries(kind), task.database(kind)
@@ -313,7 +324,7 @@ def _evaluate(method: Method, registered: TaskSpec, task: Task, options: RunOpti
             method, method_input(method, queries), method_input(method, database),
             task.truth_for(options.evaluation), config=options.evaluation,
             revisit=task.spec.protocol == "revisit", memo=memo,
-            context=task.spec.context_queries,
+            context=task.spec.context_queries, parallel=parallel,
         )
     except NoPositivesError as exc:
         raise NoPositivesError(f"task {registered.id} (seed {task.spec.seed}): {exc}; its "
@@ -586,8 +597,11 @@ def run_grid(
         label = task_id if len(methods) == 1 else f"{method.name} on {task_id}"
         say(f"[{k}/{n}] {label} seed {outcomes[i].seed if i in outcomes else todo[i]}: {what}")
 
-    if parallel is None or parallel.serial:
+    spread = _spread(parallel, len(tasks))
+    if parallel is None or parallel.serial or spread is not None:
         order = sorted([*evaluated, *tasks])
+        where_here = "this process" if spread is None else \
+            f"this process, describing and matching spread over {spread.describe()}"
         bar = tqdm(order, desc=names, unit="cell", disable=not bars)
         for k, i in enumerate(bar, 1):
             method, task_id, opts = cells[i]
@@ -601,7 +615,10 @@ def run_grid(
                 else:  # popped: its views leave memory with the cell
                     task = tasks.pop(i)
                     with frames, frame_progress.reporting(frames):
-                        cell = _evaluate(method, spec(task_id), task, opts, "this process", memo)
+                        cell = _evaluate(method, spec(task_id), task, opts, where_here, memo,
+                                         spread)
+                    if spread is not None:  # kept, as the workers' cells are, until timed
+                        write_evaluated(options.results_dir, cell)
                     outcomes[i] = finish(i, cell, task)
             except SaflError as exc:
                 outcomes[i] = failed(i, str(exc))
