@@ -66,6 +66,7 @@ def test_one_cell_spreads_its_describing_and_matching_over_the_workers(grid, kit
     from safl_bench.evaluation import cell as cell_module
 
     monkeypatch.setattr(cell_module, "SPREAD_FRAMES", 1)  # the tiny cell's 24 views spread
+    monkeypatch.setattr(runner, "_local_cores", lambda: 1)  # as if the workers were elsewhere
     monkeypatch.setenv("SAFL_BLOCK_MB", "0.0001")  # one query row a block: 12 blocks, 4 spans
     calls: list[str] = []
 
@@ -76,6 +77,7 @@ def test_one_cell_spreads_its_describing_and_matching_over_the_workers(grid, kit
         return real_run(fn, jobs, par, **kw)
 
     monkeypatch.setattr(parallel_module, "run_jobs", counted)
+    monkeypatch.setattr(runner, "run_jobs", counted)
     sad = make_method("sad")
     one = grid[:1]
     serial = runner.run_cells(sad, one, options(kitti_root, tmp_path / "serial"))
@@ -87,6 +89,10 @@ def test_one_cell_spreads_its_describing_and_matching_over_the_workers(grid, kit
     record = par[0].record
     assert record is not None and "describing and matching spread over 2 local worker processes" \
         in record.timings.how_run
+    calls.clear()
+    monkeypatch.setattr(runner, "_local_cores", lambda: 2)  # 2 workers on 2 cores: one job
+    runner.run_cells(sad, one, options(kitti_root, tmp_path / "here"), parallel=Parallel(workers=2))
+    assert calls == ["evaluate_cell x1"]
 
 
 def test_a_grid_of_methods_and_seeds_is_one_queue_with_the_serial_records(grid, kitti_root, tmp_path):
@@ -235,6 +241,7 @@ def test_ray_cluster_gives_the_serial_records(grid, kitti_root, safl_home, tmp_p
             "evaluated on Ray cluster (auto); timed afterwards in the main process")
         with monkeypatch.context() as m:
             m.setattr(cell_module, "SPREAD_FRAMES", 1)
+            m.setattr(runner, "_local_cores", lambda: 1)
             m.setenv("SAFL_BLOCK_MB", "0.0001")
             one = runner.run_cells(sad, grid[:1], options(kitti_root, tmp_path / "ray-one"),
                                    parallel=Parallel(ray_address="auto"))

@@ -49,13 +49,15 @@ def seed_count(text: str) -> int:
     return value
 
 
-def add_parallel_arguments(parser: Any, what: str) -> None:
-    """--workers N and --ray ADDRESS (see `safl_bench.common.parallel`)."""
+def add_parallel_arguments(parser: Any, what: str, ray_note: str = "") -> None:
+    """--workers N and --ray ADDRESS (see `safl_bench.common.parallel`); `ray_note` ends
+    --ray's help."""
     parser.add_argument("--workers", type=int, default=1, metavar="N",
                         help=f"{what} in N local worker processes (default 1: in this process)")
     parser.add_argument("--ray", metavar="ADDRESS",
                         help=f"{what} on a Ray cluster: 'auto' (the cluster this machine is in), "
-                             "'ray://HOST:10001', or 'local' (start one here); needs safl-bench[ray]")
+                             "'ray://HOST:10001', or 'local' (start one here); needs "
+                             f"safl-bench[ray]{ray_note}")
 
 
 def parallel_from(args: Any) -> Any:

@@ -85,7 +85,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "no result (safl_bench.matching.blocks)")
     # --score refines the preset only when given (the paper preset's score is "min", as before)
     parser.set_defaults(score=None)
-    add_parallel_arguments(parser, "build the views and evaluate the cells")
+    add_parallel_arguments(parser, "build the views and evaluate the cells",
+                           ray_note="; a grid of fewer cells than a cluster of more CPUs than "
+                                    "this machine has each cell's describing and matching "
+                                    "spread over it")
     parser.add_argument("--quiet", action="store_true",
                         help="no progress: no bars on a terminal, no line per finished cell in a "
                         "log (where stderr is not a terminal)")
