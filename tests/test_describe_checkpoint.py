@@ -243,3 +243,30 @@ def test_a_parallel_run_logs_a_line_per_cell_as_it_comes_back(tiny_tasks, kitti_
     cell_lines = [line for line in err.splitlines() if re.match(r"^\[\d+/\d+\] ", line)]
     assert cell_lines == [f"[1/2] {tiny_tasks[1]} seed 0: evaluated",  # counted as they come back
                           f"[2/2] {tiny_tasks[0]} seed 0: evaluated"]
+
+
+def test_chunks_described_on_workers_equal_one_describe_and_fill_the_cache(safl_home) -> None:
+    """What a cell spread over a cluster does (`describe_chunks`, `cached_describe(parallel=)`;
+    run in this process here): the same descriptors as one call, a shard per chunk, progress
+    per chunk; point clouds (a list) are cut by item."""
+    from safl_bench.common.parallel import Parallel
+
+    here = Parallel(workers=1)  # the jobs' code path, without starting processes
+    toy = Toy()
+    v = views(10)
+    got, per_frame, fresh = cached_describe(toy, v, parallel=here)
+    assert fresh == 10 and toy.calls == [5, 5]  # two chunks a slot
+    np.testing.assert_array_equal(got, Toy().describe(v), strict=True)
+    assert per_frame > 0 and len(list(cache_dir(toy).glob("shard-*.npz"))) == 2
+    again, _, fresh = cached_describe(Toy(), v)
+    assert fresh == 0 and np.array_equal(again, got)
+
+    m2dp = make_method("m2dp")
+    rng = np.random.default_rng(1)
+    clouds = [rng.standard_normal((200 + 10 * i, 3)).astype(np.float32) for i in range(5)]
+    seen = Recorder()
+    with progress.reporting(seen):
+        pieces = descriptor_cache.describe_chunks(m2dp, clouds, here)
+    assert [len(p[0]) for p in pieces] == [3, 2] and seen.advanced == [3, 2]
+    np.testing.assert_array_equal(np.concatenate([p[0] for p in pieces]),
+                                  np.asarray(m2dp.describe(clouds), np.float32), strict=True)

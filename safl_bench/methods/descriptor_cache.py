@@ -107,7 +107,7 @@ CHUNKING = Chunking()
 """The chunks of every cached describe (`cached_describe`'s default)."""
 
 
-def _describe_job(method: Method, views: np.ndarray) -> tuple[np.ndarray, float]:
+def _describe_job(method: Method, views: Any) -> tuple[np.ndarray, float]:
     """One chunk on a worker: its descriptors (float32) and the seconds they took there."""
     t0 = time.perf_counter()
     desc = np.asarray(method.describe(views), dtype=np.float32)
@@ -126,10 +126,12 @@ def describe_chunks(method: Method, views: Any, parallel: Parallel,
     from safl_bench.common.parallel import run_jobs
     from safl_bench.errors import DataError
 
-    views = np.asarray(views)
     n = len(views)
     size = max(1, min(CHUNKING.most, -(-n // (2 * parallel.slots()))))
     cuts = [np.arange(a, min(a + size, n)) for a in range(0, n, size)]
+
+    def part(c: np.ndarray) -> Any:  # an array's rows, or a list's items (point clouds)
+        return views[c] if isinstance(views, np.ndarray) else [views[int(i)] for i in c]
 
     def done(i: int, result: Any) -> None:
         if result.error is None:
@@ -137,7 +139,7 @@ def describe_chunks(method: Method, views: Any, parallel: Parallel,
                 on_chunk(cuts[i], result.value[0], result.value[1])
             progress.advance(len(cuts[i]))
 
-    results = run_jobs(_describe_job, [(method, views[c]) for c in cuts], parallel, on_done=done)
+    results = run_jobs(_describe_job, [(method, part(c)) for c in cuts], parallel, on_done=done)
     failed = [r.error for r in results if r.error is not None]
     if failed:
         raise DataError(f"method {method.name!r}: describing failed on a worker: {failed[0]}")
