@@ -150,9 +150,9 @@ def test_seeds_share_the_cells_timing_and_database_and_records_stay_the_same(
     sizes: list[int] = []
     plain = evaluation.describe
 
-    def counted(method, views):  # type: ignore[no-untyped-def]
+    def counted(method, views, *rest):  # type: ignore[no-untyped-def]
         sizes.append(len(views))
-        return plain(method, views)
+        return plain(method, views, *rest)
 
     monkeypatch.setattr(evaluation, "describe", counted)
     from safl_bench import sources
