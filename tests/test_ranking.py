@@ -53,3 +53,24 @@ def test_same_orders_agree() -> None:
     c = R.compare(records, "revisit", SYN, REAL, "sequence", "recall_at_1")
     assert c.tau is not None and c.tau.mean == 1.0 and c.agree >= 1 and c.disagree == 0
     assert "tau-b" in R.markdown([c]) and R.summary_rows([c])[1][3].startswith("a ")
+
+
+def test_repeated_runs_of_an_unseedable_method_are_its_cell_not_missing_seeds() -> None:
+    """MapClosures-style: a method that cannot be seeded runs a task where nothing is random 3
+    times (seeds 0-2); the comparison reads them as that cell's runs, as the tables do."""
+    records = _records({"a": (0.95, 0.9), "b": (0.5, 0.45)})
+    for side in ({"source_kind": "synth", "task_version": 4},
+                 {"source_kind": "bev", "source_label": "KITTI top-view images", "task_version": 0}):
+        for run in range(3):
+            skill = 0.2 if side["source_kind"] == "synth" else 0.15
+            records.append(scored_record("u", seed=run, skill=skill, variant=9, protocol="revisit",
+                                         sequence="00", deterministic=False, **side))
+    c = R.compare(records, "revisit", SYN, REAL, "single_frame", "recall_at_1")
+    assert c.methods == ["a@1", "b@1", "u@1"] and not c.left_out
+    assert c.values["u@1"][SYN.label].n_seeds == 3  # its runs, drawn as seeds
+    assert c.order(SYN) == ["a@1", "b@1", "u@1"]
+    # a seedable method's extra seeds on such a task are not repeats: still named as missing
+    extra = [*records, scored_record("a", seed=1, skill=0.9, variant=0, protocol="revisit",
+                                     sequence="00", source_kind="synth", task_version=4)]
+    left = R.compare(extra, "revisit", SYN, REAL, "single_frame", "recall_at_1").left_out
+    assert left == {"a@1": "seeds [0, 1] of [0] on SAFL/Synth00-Revisit-v4"}

@@ -20,6 +20,12 @@ one measure, from the records alone (no images, no rerun). Choices, and why:
   bootstrap replicates are the same mean of the cells' replicates (`uncertainty.sample`: seeds,
   then blocks of queries, 1000 replicates from a fixed seed). The cells of one task share their
   resamples, so two methods' replicates on a side are paired.
+* **Repeated runs** (`records.is_repeat`: an unseedable method, such as MapClosures, run 3 times
+  on a task where nothing is random) are that cell's runs, as the tables read them: they do not
+  count against the task's seeds, and the cell's value and replicates are over its runs (the
+  runs drawn as seeds), so their spread widens its intervals. Such a cell's replicates draw
+  other query blocks than a one-run cell's, so its pairs are not paired on the queries (their
+  intervals are then wider wherever two methods miss the same queries).
 * **tau** is Kendall's tau-b of the methods' values, synthetic against real: defined whenever
   each side has two methods that differ (ties count as tau-b counts them). Its 95 % interval
   is the percentile interval of tau-b over the replicates, replicate r ranking every method by
@@ -43,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from safl_bench.evaluation.uncertainty import LEVEL, Interval, sample
-from safl_bench.results.records import ResultRecord, seed_outcomes
+from safl_bench.results.records import ResultRecord, is_repeat, seed_outcomes
 
 #: The measures compared, by matching mode (the headline's Recall@1 in both modes).
 MEASURES = (("sequence", "recall_at_1"), ("single_frame", "recall_at_1"))
@@ -197,8 +203,9 @@ def compare(records: Sequence[ResultRecord], protocol: str, synthetic: Side, rea
                     why = f"no record on {task}"
                     break
                 want = spec(task).seeds
-                if [r.seed for r in got] != list(want):
-                    why = f"seeds {[r.seed for r in got]} of {list(want)} on {task}"
+                seeded = [r.seed for r in got if not is_repeat(r)]
+                if seeded != list(want):
+                    why = f"seeds {seeded} of {list(want)} on {task}"
                     break
                 if any(r.seen_in_training for r in got):
                     why = f"seen in training on {task}"
