@@ -50,21 +50,6 @@ def test_every_frame_a_candidate_is_the_exact_matcher(cfg: MatcherConfig, revisi
         np.testing.assert_allclose(gap, gap[0], atol=1e-4)  # float32 products
 
 
-@pytest.mark.parametrize("cfg", CONFIGS[:3], ids=lambda c: f"{c.preset}-{c.trajectory}-{c.score}")
-def test_matching_in_chunks_of_anchors_gives_the_same_result(cfg: MatcherConfig,
-                                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    """The differences are held for CHUNK anchors at a time (bounded memory); a chunk boundary
-    anywhere, even inside a trajectory, changes no value."""
-    q, db, _ = route(nq=150, ndb=120)
-    limit = np.clip(np.arange(len(q)) - 20, 0, len(db)).astype(np.int64)
-    cand = candidates.nearest(q, db, 7, db_limit=limit)
-    whole = candidates.match_candidates(q, db, cand, cfg, db_limit=limit)
-    monkeypatch.setattr(candidates, "CHUNK", 17)
-    chunked = candidates.match_candidates(q, db, cand, cfg, db_limit=limit)
-    for field in ("index", "score", "best_s", "velocity", "n_terms"):
-        np.testing.assert_array_equal(getattr(chunked, field), getattr(whole, field))
-
-
 def test_few_candidates_report_only_candidates_and_respect_the_limit() -> None:
     q, db, truth = route(noise=0.3)
     limit = np.clip(np.arange(len(q)) - 3, 0, len(db)).astype(np.int64)

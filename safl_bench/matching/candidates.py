@@ -26,13 +26,7 @@ accuracy cost. What it does, with the choices Fast-SeqSLAM's idea leaves open:
    descriptors (Eq. 4's squared L2, or its root for ``distance=euclidean``), and the contrast
    enhancement (Eq. 5) of a point uses the differences of its whole window, computed too. So
    with ``k`` = the whole database this mode finds the exact matcher's matches up to
-   floating-point rounding (a float32 dot product per difference, combined in float64, not
-   the BLAS product). Each query row's differences are computed once, on the union of the
-   columns that the trajectories passing that row read (`_Rows`), however many anchors and
-   candidates read them: neighbouring anchors' candidates lie a frame apart along a route, so
-   they share most columns (at KITTI 00's size, on a route of alike neighbours, half the time
-   of computing them per trajectory point; the same values). They are held for `CHUNK`
-   anchors at a time, which bounds the memory.
+   floating-point rounding (it computes in float64, per point, not the float32 BLAS product).
 4. What it cannot see of the whole matrix, it takes from what it computed: the shift that
    makes S non-negative (``shift=True``) is the lowest enhanced value it read (the ranking by
    the paper's ``min`` score does not depend on it), a window's zero-spread floor is 1e-12 of
@@ -70,9 +64,6 @@ from safl_bench.matching.settings import INDEXES
 IVF_PROBE = 16
 #: Queries searched together under one range selector (module doc, 1).
 GROUP = 64
-#: Trajectory anchors (queries) matched per pass: the row differences they read are held for
-#: so many at once (module doc, 3), which bounds the memory at any database size.
-CHUNK = 8192
 #: The extra that installs FAISS.
 EXTRA = "pip install 'safl-bench[faiss]' (or pip install faiss-cpu)"
 
@@ -193,53 +184,15 @@ def match_candidates(queries: np.ndarray, database: np.ndarray, cand: Candidates
     dbn = np.einsum("ij,ij->i", dbc, dbc, dtype=np.float64)
     offs = config.offsets()
     u_lo, _ = config.u_range()
-    cand_i = np.ascontiguousarray(cand.index)
-    out = (np.full(nq, -1, np.int64), np.full(nq, np.inf), np.full(nq, np.inf),
-           np.full(nq, -1, np.int64), np.zeros(nq, np.int64), np.full(nq, np.inf))
-    skip, clip = config.edge_queries == "skip", config.out_of_range == "clip"
-    n_points = offs.shape[1]
-    for t0 in range(0, nq, CHUNK):
-        t1 = min(nq, t0 + CHUNK)
-        valid = _valid(cand_i, offs, u_lo, skip, clip, limit, ndb, t0, t1)
-        r0, r1 = max(0, t0 + u_lo), min(nq, t1 - 1 + u_lo + n_points)
-        rows = _Rows.build(qc, dbc, dbn, cand_i, valid, offs, u_lo, before, after, root, t0, t1, r0, r1)
-        _kernel(cand_i, valid, offs, u_lo, limit, ndb, config.ratio_window // 2, before, after,
-                t0, t1, r0, rows.first, rows.count, rows.start, rows.offset, rows.values, *out)
-    index, best, second, vel, n_terms, low = out
+    index, best, second, vel, n_terms, low = _kernel(
+        qc, dbc, dbn, np.ascontiguousarray(cand.index), offs, u_lo,
+        config.edge_queries == "skip", config.out_of_range == "clip", limit,
+        config.ratio_window // 2, before, after, root)
     shift = 0.0
     if config.shift:
         seen = low[np.isfinite(low)]
         shift = float(seen.min()) if seen.size else 0.0
     return finish(config, (index, best, second, vel, n_terms), shift, ndb, window)
-
-
-@dataclass(frozen=True)
-class _Rows:
-    """The differences the trajectories of anchors t0..t1 read, per query row r0..r1 (module
-    doc, 3): each row's columns as sorted, disjoint spans (`start`; row r's spans are
-    ``first[r - r0]`` onwards, ``count[r - r0]`` of them) whose values lie at `offset` in
-    `values`. Computed once per (row, column), however many anchors and candidates read it."""
-
-    first: np.ndarray
-    count: np.ndarray
-    start: np.ndarray
-    offset: np.ndarray
-    values: np.ndarray
-
-    @staticmethod
-    def build(qc: np.ndarray, dbc: np.ndarray, dbn: np.ndarray, cand: np.ndarray, valid: np.ndarray,
-              offs: np.ndarray, u_lo: int, before: int, after: int, root: bool, t0: int, t1: int,
-              r0: int, r1: int) -> _Rows:
-        n_spans, n_values = _span_sizes(cand, valid, offs, u_lo, before, after, len(dbc), t0, t1, r0, r1)
-        first = np.concatenate(([0], np.cumsum(n_spans)[:-1])).astype(np.int64)
-        value_first = np.concatenate(([0], np.cumsum(n_values)[:-1])).astype(np.int64)
-        start = np.empty(int(n_spans.sum()), np.int64)
-        end, offset = np.empty_like(start), np.empty_like(start)
-        values = np.empty(int(n_values.sum()), np.float64)
-        _span_fill(cand, valid, offs, u_lo, before, after, len(dbc), t0, t1, r0, r1, first,
-                   value_first, start, end, offset)
-        _span_values(qc, dbc, dbn, root, r0, first, n_spans, start, end, offset, values)
-        return _Rows(first, n_spans, start, offset, values)
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -250,21 +203,28 @@ def _dot(a, b):
     return s
 
 
-@numba.njit(parallel=True, cache=True)
-def _valid(cand, offs, u_lo, skip_edges, clip, limit, ndb, t0, t1):
-    """(t1 - t0, k, n_velocities) bool: whether trajectory (T, candidate, velocity) is searched
-    (the matcher's edge and out-of-range rules, module doc, 2)."""
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before, after, root):
+    nq = q.shape[0]
+    ndb = db.shape[0]
     nv, L = offs.shape
     kc = cand.shape[1]
-    nq = cand.shape[0]
-    out = np.zeros((t1 - t0, kc, nv), np.bool_)
-    for t in numba.prange(t1 - t0):
-        T = t0 + t
+    index = np.full(nq, -1, dtype=np.int64)
+    best_s = np.full(nq, np.inf)
+    second = np.full(nq, np.inf)
+    vel = np.full(nq, -1, dtype=np.int64)
+    n_terms = np.zeros(nq, dtype=np.int64)
+    low = np.full(nq, np.inf)
+    enhance = before + after > 0
+    for T in numba.prange(nq):
         k0 = max(0, -T - u_lo)
         k1 = min(L, nq - T - u_lo)
+        cnt = k1 - k0
+        n_terms[T] = cnt
         jend = limit[T]
-        if (skip_edges and k1 - k0 < L) or jend <= 0:
+        if (skip_edges and cnt < L) or jend <= 0:
             continue
+        sums = np.full((kc, nv), np.inf)
         for ci in range(kc):
             j = cand[T, ci]
             if j < 0 or j >= jend:
@@ -277,144 +237,34 @@ def _valid(cand, offs, u_lo, skip_edges, clip, limit, ndb, t0, t1):
                         if c < 0 or c >= ndb:
                             inside = False
                             break
-                out[t, ci, vi] = inside
-    return out
-
-
-@numba.njit(cache=True)
-def _piece(t, ci, k, j, valid, offs, before, after, ndb):
-    """The columns [a, b) that trajectory point k of (anchor t, candidate ci at frame j) reads:
-    its velocities' points and their enhancement windows; (0, 0) when none is searched."""
-    cmin = ndb
-    cmax = -1
-    for vi in range(offs.shape[0]):
-        if valid[t, ci, vi]:
-            c = min(max(j + offs[vi, k], 0), ndb - 1)
-            cmin = min(cmin, c)
-            cmax = max(cmax, c)
-    if cmax < 0:
-        return 0, 0
-    return max(0, cmin - before), min(ndb, cmax + after + 1)
-
-
-@numba.njit(cache=True)
-def _row_spans(r, cand, valid, offs, u_lo, before, after, ndb, t0, t1):
-    """Row r's columns as sorted disjoint spans (starts, ends), the union of the pieces of
-    every anchor in t0..t1 whose trajectory passes row r."""
-    L = offs.shape[1]
-    kc = cand.shape[1]
-    lo = max(t0, r - u_lo - (L - 1))
-    hi = min(t1, r - u_lo + 1)
-    n = max(0, hi - lo) * kc
-    pa = np.empty(n, np.int64)
-    pb = np.empty(n, np.int64)
-    m = 0
-    for T in range(lo, hi):
-        k = r - T - u_lo
-        for ci in range(kc):
-            j = cand[T, ci]
-            if j < 0:
-                continue
-            a, b = _piece(T - t0, ci, k, j, valid, offs, before, after, ndb)
-            if b > a:
-                pa[m] = a
-                pb[m] = b
-                m += 1
-    order = np.argsort(pa[:m])
-    starts = np.empty(m, np.int64)
-    ends = np.empty(m, np.int64)
-    s = 0
-    for x in range(m):
-        a, b = pa[order[x]], pb[order[x]]
-        if s > 0 and a <= ends[s - 1]:
-            ends[s - 1] = max(ends[s - 1], b)
-        else:
-            starts[s] = a
-            ends[s] = b
-            s += 1
-    return starts[:s], ends[:s]
-
-
-@numba.njit(parallel=True, cache=True)
-def _span_sizes(cand, valid, offs, u_lo, before, after, ndb, t0, t1, r0, r1):
-    n_spans = np.zeros(r1 - r0, np.int64)
-    n_values = np.zeros(r1 - r0, np.int64)
-    for i in numba.prange(r1 - r0):
-        starts, ends = _row_spans(r0 + i, cand, valid, offs, u_lo, before, after, ndb, t0, t1)
-        n_spans[i] = starts.shape[0]
-        n_values[i] = (ends - starts).sum()
-    return n_spans, n_values
-
-
-@numba.njit(parallel=True, cache=True)
-def _span_fill(cand, valid, offs, u_lo, before, after, ndb, t0, t1, r0, r1, first, value_first,
-               start, end, offset):
-    for i in numba.prange(r1 - r0):
-        starts, ends = _row_spans(r0 + i, cand, valid, offs, u_lo, before, after, ndb, t0, t1)
-        o = value_first[i]
-        for s in range(starts.shape[0]):
-            start[first[i] + s] = starts[s]
-            end[first[i] + s] = ends[s]
-            offset[first[i] + s] = o
-            o += ends[s] - starts[s]
-
-
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _span_values(q, db, dbn, root, r0, first, count, start, end, offset, values):
-    """Each row's differences on its spans: Eq. 4's squared L2 (or its root), as the kernel
-    computed them per trajectory point before they were held per row."""
-    for i in numba.prange(first.shape[0]):
-        qr = q[r0 + i]
-        qn = 0.0
-        for x in range(qr.shape[0]):
-            qn += float(qr[x]) * float(qr[x])
-        for sp in range(first[i], first[i] + count[i]):
-            o = offset[sp]
-            for c in range(start[sp], end[sp]):
-                v = max(qn + dbn[c] - 2.0 * float(_dot(qr, db[c])), 0.0)
-                values[o + c - start[sp]] = np.sqrt(v) if root else v
-
-
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _kernel(cand, valid, offs, u_lo, limit, ndb, half, before, after, t0, t1, r0,
-            first, count, start, offset, values, index, best_s, second, vel, n_terms, low):
-    nq = cand.shape[0]
-    nv, L = offs.shape
-    kc = cand.shape[1]
-    enhance = before + after > 0
-    for T in numba.prange(t0, t1):
-        t = T - t0
-        k0 = max(0, -T - u_lo)
-        k1 = min(L, nq - T - u_lo)
-        cnt = k1 - k0
-        n_terms[T] = cnt
-        sums = np.full((kc, nv), np.inf)
-        for ci in range(kc):
-            for vi in range(nv):
-                if valid[t, ci, vi]:
+                if inside:
                     sums[ci, vi] = 0.0
         lowest = np.inf
         for k in range(k0, k1):
             r = T + u_lo + k
-            f = first[r - r0]
-            n = count[r - r0]
+            qr = q[r]
+            qn = 0.0
+            for x in range(qr.shape[0]):
+                qn += float(qr[x]) * float(qr[x])
             for ci in range(kc):
                 j = cand[T, ci]
-                if j < 0:
+                if j < 0 or j >= jend:
                     continue
-                a, b = _piece(t, ci, k, j, valid, offs, before, after, ndb)
-                if b <= a:
+                cmin = ndb
+                cmax = -1
+                for vi in range(nv):
+                    if sums[ci, vi] < np.inf:
+                        c = min(max(j + offs[vi, k], 0), ndb - 1)
+                        cmin = min(cmin, c)
+                        cmax = max(cmax, c)
+                if cmax < 0:
                     continue
-                # the span of row r holding [a, b): the last one starting at or before a
-                lo_s, hi_s = 0, n - 1
-                while lo_s < hi_s:
-                    mid = (lo_s + hi_s + 1) // 2
-                    if start[f + mid] <= a:
-                        lo_s = mid
-                    else:
-                        hi_s = mid - 1
-                base = offset[f + lo_s] + a - start[f + lo_s]
-                d = values[base:base + (b - a)]
+                a = max(0, cmin - before)
+                b = min(ndb, cmax + after + 1)
+                d = np.empty(b - a)
+                for c in range(a, b):
+                    v = max(qn + dbn[c] - 2.0 * float(_dot(qr, db[c])), 0.0)
+                    d[c - a] = np.sqrt(v) if root else v
                 floor = 0.0
                 if enhance:
                     m = 0.0
@@ -479,6 +329,7 @@ def _kernel(cand, valid, offs, u_lo, limit, ndb, half, before, after, t0, t1, r0
                 if j >= 0 and abs(j - jstar) > half and per[ci] < sv:
                     sv = per[ci]
             second[T] = sv / cnt
+    return index, best_s, second, vel, n_terms, low
 
 
 def candidate_ranks(cand: Candidates, true_places: list[np.ndarray], not_found: int) -> np.ndarray:
