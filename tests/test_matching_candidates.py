@@ -50,6 +50,26 @@ def test_every_frame_a_candidate_is_the_exact_matcher(cfg: MatcherConfig, revisi
         np.testing.assert_allclose(gap, gap[0], atol=1e-4)  # float32 products
 
 
+@pytest.mark.parametrize("dim", [8, 37, 1024])
+def test_a_product_has_the_same_bits_in_every_slot_of_the_tile(dim: int) -> None:
+    """The kernel makes each (row, frame) product in whichever tile slot a group puts it;
+    the value must not depend on the slot."""
+    rng = np.random.default_rng(dim)
+    q = rng.standard_normal((5, dim)).astype(np.float32)
+    db = rng.standard_normal((5, dim)).astype(np.float32)
+    seen = set()
+    for i in range(4):
+        for m in range(4):
+            rows = [1 + (x + i) % 4 for x in range(4)]
+            cols = [1 + (x + m) % 4 for x in range(4)]
+            rows[i], cols[m] = 0, 0
+            out = np.zeros((4, 4), np.float32)
+            candidates._tile(q, *rows, db, *cols, out, 0)
+            seen.add(out[i, m].tobytes())
+            np.testing.assert_allclose(out[i, m], q[0] @ db[0], rtol=1e-5)
+    assert len(seen) == 1
+
+
 def test_few_candidates_report_only_candidates_and_respect_the_limit() -> None:
     q, db, truth = route(noise=0.3)
     limit = np.clip(np.arange(len(q)) - 3, 0, len(db)).astype(np.int64)
