@@ -345,10 +345,15 @@ def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before,
                         for x in range(b - a):
                             s2 += (d[x] - m) ** 2
                         floor = 1e-12 * s2 / (b - a)
+                    seen_c = -1  # velocities that meet at one frame share its value
+                    seen_z = 0.0
                     for vi in range(nv):
                         if sums[ci, vi] == np.inf:
                             continue
                         c = min(max(j + offs[vi, k], 0), ndb - 1)
+                        if c == seen_c:
+                            sums[ci, vi] += seen_z
+                            continue
                         z = d[c - a]
                         if enhance:
                             wa = max(0, c - before)
@@ -368,6 +373,8 @@ def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before,
                                 z = (d[c - a] - mu) / np.sqrt(var) if var > floor else 0.0
                         sums[ci, vi] += z
                         lowest = min(lowest, z)
+                        seen_c = c
+                        seen_z = z
         low[T] = lowest
         cstar = -1
         vstar = -1
