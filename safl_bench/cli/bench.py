@@ -37,6 +37,8 @@ HELP = "print speed figures: descriptor ms/frame per method, matcher time and me
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """`methods` or `matcher`, with their options."""
+    from safl_bench.matching.blocks import DEFAULT_BLOCK_MB
+
     parser.add_argument("what", choices=("methods", "matcher", "parallel", "images", "bevplace", "seeds", "main-job", "retrieval", "slam"), help="what to time")
     parser.add_argument("--method", action="append", help="a method to time, NAME or NAME@VERSION (repeatable; default: every registered "
                         "version; seeds: stable_afl@1, bigan@1)")
@@ -53,7 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--index", choices=("flat", "ivf"), default="flat",
                         help="matcher: the candidates' FAISS index, exact (flat) or approximate (ivf) (default flat)")
     parser.add_argument("--block-mb", default=None, metavar="MB",
-                        help="matcher: the exact mode's memory budget per query block (default $SAFL_BLOCK_MB or 1024)")
+                        help=f"matcher: the exact mode's memory budget per query block (default $SAFL_BLOCK_MB or "
+                             f"{DEFAULT_BLOCK_MB})")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     parser.add_argument("--sequence", default="00", help="parallel: the sequence whose maps are built (default 00)")
     parser.add_argument("--step", type=int, default=1, help="parallel: frame step (default 1: every frame)")

@@ -28,6 +28,7 @@ HELP = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from safl_bench.matching.blocks import DEFAULT_BLOCK_MB
     from safl_bench.tasks.builtin import SUITES
 
     parser.add_argument("--method", required=True, action="append",
@@ -81,7 +82,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--block-mb", metavar="MB", default=None,
         help="memory budget of the difference matrix's query blocks: the matcher holds about this "
-        "much of it at a time, whatever the frames (default: $SAFL_BLOCK_MB or 1024); changes "
+        f"much of it at a time, whatever the frames (default: $SAFL_BLOCK_MB or {DEFAULT_BLOCK_MB}); "
+        "changes "
         "no result (safl_bench.matching.blocks)")
     # --score refines the preset only when given (the paper preset's score is "min", as before)
     parser.set_defaults(score=None)
