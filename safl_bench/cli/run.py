@@ -83,8 +83,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--block-mb", metavar="MB", default=None,
         help="memory budget of the difference matrix's query blocks: the matcher holds about this "
         f"much of it at a time, whatever the frames (default: $SAFL_BLOCK_MB or {DEFAULT_BLOCK_MB}); "
-        "changes "
-        "no result (safl_bench.matching.blocks)")
+        "changes no result (safl_bench.matching.blocks)")
     # --score refines the preset only when given (the paper preset's score is "min", as before)
     parser.set_defaults(score=None)
     add_parallel_arguments(parser, "build the views and evaluate the cells",
