@@ -130,7 +130,8 @@ def test_bad_input_is_named(monkeypatch: pytest.MonkeyPatch) -> None:
 
     monkeypatch.setattr(builtins, "__import__", no_faiss)
     with pytest.raises(ConfigError, match=r"candidate search needs FAISS.*safl-bench\[faiss\]"):
-        candidates.nearest(q, db, 3)
+        candidates.nearest(q, db, 3, index="ivf")
+    assert candidates.nearest(q, db, 3).index.shape == (len(q), 3)  # the flat search is our own
 
 
 def test_records_carry_the_candidate_settings_only_when_set() -> None:
@@ -140,3 +141,35 @@ def test_records_carry_the_candidate_settings_only_when_set() -> None:
     assert cfg.to_dict()["evaluation"]["candidates"] == 10
     assert EvaluationConfig.from_dict(cfg.to_dict()) == cfg
     assert presets.label(cfg) == "paper+candidates=10,index=ivf"
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=lambda c: f"{c.preset}-{c.trajectory}-{c.score}")
+@pytest.mark.parametrize("revisit", [False, True])
+def test_the_flat_pass_over_rows_is_the_exact_matcher_in_any_blocks(cfg: MatcherConfig,
+                                                                      revisit: bool) -> None:
+    q, db, _ = route()
+    limit = np.clip(np.arange(len(q)) - 20, 0, len(db)).astype(np.int64) if revisit else None
+    D = sqeuclidean(q, db, dtype="float64")
+    exact = match(D, MatcherConfig(**{**cfg.to_dict(), "dtype": "float64"}), db_limit=limit)
+    first = None
+    for block in (None, 1, 7, 50):
+        _, (got,), _ = candidates.search_rows(lambda a, b: D[a:b], len(q), len(db), len(db),
+                                              [cfg], db_limit=limit, block=block)
+        np.testing.assert_array_equal(got.index, exact.index)
+        np.testing.assert_array_equal(got.velocity, exact.velocity)
+        if first is None:
+            first = got
+        np.testing.assert_array_equal(got.score, first.score)  # blocks change no bit
+
+
+@pytest.mark.parametrize("k", [1, 5, 32, 33, 300])
+def test_the_flat_search_keeps_the_k_lowest_allowed_frames_ties_to_the_lower(k: int) -> None:
+    rng = np.random.default_rng(k)
+    X = rng.integers(0, 20, (40, 300)).astype(np.float32)  # many ties
+    lim = rng.integers(0, 301, 40)
+    idx, dist = candidates._nearest_rows(X, lim, k)
+    for r in range(40):
+        want = np.sort(np.argsort(X[r, :lim[r]], kind="stable")[:k])
+        got = idx[r][idx[r] >= 0]
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(dist[r][:len(got)], X[r, got])

@@ -6,8 +6,10 @@ correctness is checked too) in the chosen mode:
 
 * ``exact``: the matcher in query blocks (`safl_bench.matching.blocks`), its difference rows
   computed block by block from the descriptors, as a cell computes them;
-* ``candidates``: the candidate search (`safl_bench.matching.candidates`): the FAISS index and
-  its search, then the sequence search through each query's K nearest frames.
+* ``candidates``: the candidate search (`safl_bench.matching.candidates`) through each query's
+  K nearest frames: with the ``flat`` index, one pass over the difference rows, block by block
+  (`candidates.search_rows`); with ``ivf``, FAISS's index and its search, then the sequence
+  search.
 
 Where the whole difference matrix fits in memory (`dense_fits`), the dense path (the whole
 matrix, then `matcher.match`) is timed in the same run, side by side, and the chosen mode's
@@ -96,12 +98,13 @@ def run(n: int = 4541, dim: int = 1024, *, mode: str = "exact", k: int = 10,
         raise ConfigError(f"--dim must be a whole number >= 1, got {dim!r}")
     if mode == "candidates":
         candidates.check_k(k, n)
-        candidates.faiss_module()
+        if index == "ivf":
+            candidates.faiss_module()
     budget = blocks.block_mb(block_mb, "--block-mb")
     q, db, truth = planted(n, dim, seed)
     cfg = matching.MatcherConfig()
     matching.seqslam(np.ones((12, 12)))  # compile / load the numba kernels outside the clock
-    step = blocks.block_rows(n, n, budget)
+    step = blocks.block_rows(n, n, budget, copies=3 if mode == "exact" else 2)
 
     def exact() -> matching.MatchResult:
         (res,), _ = blocks.match_rows(lambda a, b: distance.sqeuclidean(q[a:b], db), n, n,
@@ -109,13 +112,19 @@ def run(n: int = 4541, dim: int = 1024, *, mode: str = "exact", k: int = 10,
         return res
 
     def through_candidates() -> matching.MatchResult:
+        if index == "flat":
+            _, (res,), _ = candidates.search_rows(
+                lambda a, b: distance.sqeuclidean(q[a:b], db), n, n, k, [cfg], block=step)
+            return res
         cand = candidates.nearest(q, db, k, index=index)
         return candidates.match_candidates(q, db, cand, cfg)
 
-    if mode == "candidates":  # compile the kernel outside the clock
-        small_q, small_db, _ = planted(16, 4)
+    if mode == "candidates":  # compile the kernels outside the clock
+        small_q, small_db, _ = planted(64, 4)
         candidates.match_candidates(small_q, small_db, candidates.nearest(small_q, small_db, 2),
                                     cfg)
+        candidates.search_rows(lambda a, b: distance.sqeuclidean(small_q[a:b], small_db), 64,
+                               64, 2, [cfg])
     fn = exact if mode == "exact" else through_candidates
     t0 = time.perf_counter()
     result, peak = timing.measure_peak(fn)  # the first run: its matches and its memory
@@ -129,7 +138,7 @@ def run(n: int = 4541, dim: int = 1024, *, mode: str = "exact", k: int = 10,
         "identical_to_dense": None, "agree_with_dense": None,
         "k": k if mode == "candidates" else None,
         "index": index if mode == "candidates" else None,
-        "block_rows": step if mode == "exact" else None, "block_mb": budget,
+        "block_rows": step if mode == "exact" or index == "flat" else None, "block_mb": budget,
         "first_run_s": first_s, "timing": timed.to_dict(),
         "problem": {"n_queries": n, "n_database": n, "dim": dim, "dtype": "float32",
                     "planted_queries": int((truth >= 0).sum()), "seed": seed},
@@ -188,8 +197,9 @@ def _dense(q: np.ndarray, db: np.ndarray, cfg: matching.MatcherConfig, repeats: 
 def format_results(res: dict[str, Any]) -> str:
     """The figures as the command prints them."""
     env = res["timing"]["env"]
+    blocks_of = f", blocks of {res['block_rows']} rows" if res["block_rows"] else ""
     mode = res["mode"] + (f", k={res['k']}, {res['index']} index" if res["mode"] == "candidates"
-                          else f", blocks of {res['block_rows']} rows")
+                          else "") + blocks_of
     lines = [f"problem: {res['frames']} x {res['frames']}, {res['dim']}-d float32 descriptors, "
              f"half of the queries on a planted route; {env['cpu_model']}, "
              f"{env['usable_cpus']} CPUs, numba threads {env['numba_threads']}, "

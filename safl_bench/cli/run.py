@@ -195,7 +195,8 @@ def main(args: argparse.Namespace) -> int:
         from safl_bench.evaluation.cell import check_candidates
         from safl_bench.matching.candidates import faiss_module
 
-        faiss_module()
+        if options.evaluation.index == "ivf":  # the flat index is the project's own search
+            faiss_module()
         for methods in built.values():
             for method in methods:
                 check_candidates(method, options.evaluation)

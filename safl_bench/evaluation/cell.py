@@ -296,7 +296,7 @@ def evaluate_method(
     windows = [window.window if c.needs_window and window else None for c in configs]
     if cfg.candidates is not None:
         results, seconds, ranks = _through_candidates(method, d_q, d_db, cfg, configs, windows,
-                                                      limit, part, scored)
+                                                      limit, part, scored, block_mb)
     else:
         results, seconds = _exact(method, d_q, d_db, cfg, configs, windows, limit, block_mb,
                                   rank_rows, parallel, ranks, part, scored)
@@ -416,22 +416,34 @@ def check_candidates(method: Any, cfg: EvaluationConfig) -> None:
 def _through_candidates(method: Method, d_q: np.ndarray, d_db: np.ndarray,
                         cfg: EvaluationConfig, configs: list[MatcherConfig],
                         windows: list[int | None], limit: np.ndarray | None, part: GroundTruth,
-                        scored: slice) -> tuple[list[MatchResult], list[float], np.ndarray]:
+                        scored: slice, block_mb: float | None = None,
+                        ) -> tuple[list[MatchResult], list[float], np.ndarray]:
     """Both modes through each query's ``cfg.candidates`` nearest frames
     (`safl_bench.matching.candidates`), the single-frame ranks among them; the candidate
-    search's time counts to the sequence matcher's."""
+    search's time counts to the sequence matcher's. The ``flat`` index reads the exact
+    matcher's difference rows (`compare`), in blocks under `block_mb`; ``ivf`` is FAISS's."""
     check_candidates(method, cfg)
-    t0 = time.perf_counter()
-    cand = candidates.nearest(d_q, d_db, int(cfg.candidates or 0), index=cfg.index,
-                              db_limit=limit)
-    search_s = time.perf_counter() - t0
-    results, seconds = [], []
-    for c, w in zip(configs, windows, strict=True):
+    k = int(cfg.candidates or 0)
+    if cfg.index == "flat":
+        nq, ndb = len(d_q), len(d_db)
+
+        def rows(a: int, b: int) -> np.ndarray:
+            return compare(method, d_q[a:b], d_db, cfg.distance)
+
+        cand, results, seconds = candidates.search_rows(
+            rows, nq, ndb, k, configs, db_limit=limit, windows=windows,
+            block=blocks.block_rows(nq, ndb, block_mb, copies=2))
+    else:
         t0 = time.perf_counter()
-        results.append(candidates.match_candidates(d_q, d_db, cand, c, db_limit=limit,
-                                                   enhance_window=w,
-                                                   root=cfg.distance == "euclidean"))
-        seconds.append(time.perf_counter() - t0 + search_s)
+        cand = candidates.nearest(d_q, d_db, k, index=cfg.index, db_limit=limit)
+        search_s = time.perf_counter() - t0
+        results, seconds = [], []
+        for c, w in zip(configs, windows, strict=True):
+            t0 = time.perf_counter()
+            results.append(candidates.match_candidates(d_q, d_db, cand, c, db_limit=limit,
+                                                       enhance_window=w,
+                                                       root=cfg.distance == "euclidean"))
+            seconds.append(time.perf_counter() - t0 + search_s)
     sub = candidates.Candidates(cand.index[scored], cand.distance[scored])
     ranks = candidates.candidate_ranks(sub, [part.true_matches(i) for i in range(part.n_queries)],
                                        NOT_RETRIEVED)

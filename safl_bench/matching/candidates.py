@@ -8,31 +8,38 @@ matcher (`safl_bench.matching.matcher`, in blocks: `safl_bench.matching.blocks`)
 definition; this mode approximates it, and `docs/reference/speed.md` gives its measured
 accuracy cost. What it does, with the choices Fast-SeqSLAM's idea leaves open:
 
-1. Candidates. An index over the database descriptors gives each query row its `k` nearest
-   frames by L2 (FAISS: ``flat`` = exact search, ``IndexFlatL2``; ``ivf`` = approximate,
-   ``IndexIVFFlat`` with `ivf_lists` lists, `IVF_PROBE` of them searched, k-means with FAISS's
-   fixed seed, so the same candidates every run). With a ``db_limit`` (the revisit protocol),
-   only frames ``j < db_limit[T]`` are candidates of T: queries are searched in groups of
+1. Candidates: each query row's `k` nearest database frames by the cell's difference. With
+   the ``flat`` index (exact search) they are the `k` lowest values of the query's own row of
+   the exact matcher's difference matrix (ties: the lower frame), read as the rows are made,
+   one block at a time (`search_rows`). The rows are the BLAS products the exact matcher makes
+   (`safl_bench.methods.distance`), so no second index is built: FAISS's flat index made the
+   same N x N x D product, and at KITTI 00's size that product alone is most of the time
+   (module doc of `safl_bench.bench.matching_bench`). With the ``ivf`` index (approximate):
+   FAISS's ``IndexIVFFlat`` over the database descriptors by L2, `ivf_lists` lists,
+   `IVF_PROBE` of them searched, k-means with FAISS's fixed seed, so the same candidates every
+   run. With a ``db_limit`` (the revisit protocol), only frames ``j < db_limit[T]`` are
+   candidates of T: the flat search reads only them; FAISS searches queries in groups of
    `GROUP` with a range selector up to the group's largest limit and ``k`` plus the spread of
    the group's limits neighbours, so that after dropping each query's forbidden frames it
-   still holds its k nearest allowed ones (exactly, for the ``flat`` index).
+   still holds its k nearest allowed ones.
 2. The reported frame of query T is one of T's own candidates: ``S(T, j, V)`` (module doc of
    the matcher, 2-5: the same trajectories, velocities, edge and out-of-range rules) is
    evaluated for ``j`` in T's candidates only, and the match is the lowest (ties: lowest
    velocity, then lowest j, the one tie rule). This is where the accuracy is lost: a true
    match whose single frame is not among the k nearest cannot be reported, however well its
    sequence agrees.
-3. The values the trajectories read are exact: each point's difference is computed from the
-   descriptors (Eq. 4's squared L2, or its root for ``distance=euclidean``), and the contrast
-   enhancement (Eq. 5) of a point uses the differences of its whole window, computed too. So
-   with ``k`` = the whole database this mode finds the exact matcher's matches up to
-   floating-point rounding (not the BLAS product: each dot product is summed in float32 by the
-   kernel's own tile, the rest in float64). The work is arranged for the cache, not the
-   arithmetic: a query's candidates one by one, each candidate's trajectory points four at a
-   time, whose dot products with the union of the frames their windows read are made 4 x 4 at
-   once (`_tile`; each row and frame read serves four products, against one when each product
-   is made alone, which was 1.6x slower at KITTI 00 size). Each (candidate, velocity) sum still
-   adds its points in ascending order.
+3. The values the trajectories read are exact, and the contrast enhancement (Eq. 5) of a point
+   uses the differences of its whole window. With the ``flat`` index they are read from the
+   rows held (the block's, and the rows the trajectories reach before and after it), so with
+   ``k`` = the whole database this mode finds the exact matcher's matches; its enhancement
+   sums in float64 in its own order, so scores agree up to rounding. With ``ivf``, which holds
+   no rows, each point's difference is made from the descriptors (Eq. 4's squared L2, or its
+   root for ``distance=euclidean``): each dot product is summed in float32 by the kernel's
+   own tile, the rest in float64. That work is arranged for the cache: a query's candidates
+   one by one, each candidate's trajectory points four at a time, whose dot products with the
+   union of the frames their windows read are made 4 x 4 at once (`_tile`; each row and frame
+   read serves four products, against one when each product is made alone, which was 1.6x
+   slower at KITTI 00 size). Each (candidate, velocity) sum adds its points in ascending order.
 4. What it cannot see of the whole matrix, it takes from what it computed: the shift that
    makes S non-negative (``shift=True``) is the lowest enhanced value it read (the ranking by
    the paper's ``min`` score does not depend on it), a window's zero-spread floor is 1e-12 of
@@ -43,13 +50,21 @@ accuracy cost. What it does, with the choices Fast-SeqSLAM's idea leaves open:
    its candidates is ranked at no N (`safl_bench.methods.retrieval.NOT_RETRIEVED`), as for a
    retrieval method that did not return it.
 
-Only descriptors compared by L2 can be searched so: a method with its own distance
-(`Method.distance` overridden: SAD's L1, Scan Context's shifted cosine) is a ConfigError unless
-the cell's ``distance=euclidean`` says to compare its descriptors by L2.
+Only descriptors compared by L2 can be searched so (the ``ivf`` index is an L2 index; the flat
+search keeps the same rule, so that the two indexes rank by the same difference): a method with
+its own distance (`Method.distance` overridden: SAD's L1, Scan Context's shifted cosine) is a
+ConfigError unless the cell's ``distance=euclidean`` says to compare its descriptors by L2.
+
+Memory. The flat path holds one block of rows and the rows its trajectories reach before and
+after it (`_rows_step`: two copies of a block in the budget of
+`safl_bench.matching.blocks.block_rows`), and the (Nq, k) candidates; FAISS is needed for the
+``ivf`` index only.
 """
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -60,6 +75,7 @@ from safl_bench.errors import ConfigError, DataError
 from safl_bench.matching.matcher import (
     MatcherConfig,
     MatchResult,
+    _as_difference,
     db_limits,
     finish,
     window_of,
@@ -92,7 +108,8 @@ def faiss_module() -> Any:
 @dataclass(frozen=True)
 class Candidates:
     """Each query's candidate database frames, ascending (-1 pads a row with fewer), and the
-    index's L2 distance (squared) to each (+inf on padding)."""
+    difference the index ranked them by (+inf on padding): the difference row's value for the
+    flat search, FAISS's squared L2 for ``ivf``."""
 
     index: np.ndarray  # (Nq, k) int64
     distance: np.ndarray  # (Nq, k) float64
@@ -109,33 +126,40 @@ def check_k(k: Any, n_database: int) -> int:
 
 
 def nearest(queries: np.ndarray, database: np.ndarray, k: int, *, index: str = "flat",
-            db_limit: np.ndarray | None = None) -> Candidates:
-    """The `k` nearest database frames of each query by L2 (module doc, 1)."""
+            db_limit: np.ndarray | None = None, block: int | None = None) -> Candidates:
+    """The `k` nearest database frames of each query by L2 (module doc, 1); ``flat``: by the
+    squared L2 rows of `safl_bench.methods.distance.sqeuclidean`, `block` query rows at a time
+    (`safl_bench.matching.blocks.block_rows` when None)."""
     if index not in INDEXES:
         raise ConfigError(f"index must be one of {', '.join(map(repr, INDEXES))}, got {index!r}")
     q, db = _descriptors(queries, database)
     nq, ndb = len(q), len(db)
     k = check_k(k, ndb)
     limit = db_limits(db_limit, nq, ndb)
+    if index == "flat":
+        from safl_bench.methods.distance import sqeuclidean
+
+        step = _rows_step(nq, ndb, block)
+        out_i = np.empty((nq, k), np.int64)
+        out_d = np.empty((nq, k))
+        for a in range(0, nq, step):
+            b = min(a + step, nq)
+            out_i[a:b], out_d[a:b] = _nearest_rows(sqeuclidean(q[a:b], db), limit[a:b], k)
+        return Candidates(out_i, out_d)
     faiss = faiss_module()
     centre = db.mean(axis=0, dtype=np.float64)
     dbc = np.ascontiguousarray(db - centre, dtype=np.float32)
     qc = np.ascontiguousarray(q - centre, dtype=np.float32)
     dim = db.shape[1]
-    probe: dict[str, Any] = {}
-    if index == "flat":
-        ix = faiss.IndexFlatL2(dim)
-    else:
-        lists = ivf_lists(ndb)
-        ix = faiss.IndexIVFFlat(faiss.IndexFlatL2(dim), dim, lists)
-        ix.train(dbc)
-        probe = {"nprobe": min(IVF_PROBE, lists)}
+    lists = ivf_lists(ndb)
+    ix = faiss.IndexIVFFlat(faiss.IndexFlatL2(dim), dim, lists)
+    ix.train(dbc)
+    probe = {"nprobe": min(IVF_PROBE, lists)}
     ix.add(dbc)
     out_i = np.full((nq, k), -1, np.int64)
     out_d = np.full((nq, k), np.inf)
     if db_limit is None:
-        params = faiss.SearchParametersIVF(**probe) if probe else None
-        dist, idx = ix.search(qc, k, params=params)
+        dist, idx = ix.search(qc, k, params=faiss.SearchParametersIVF(**probe))
         out_i[:], out_d[:] = idx, dist
     else:
         order = np.argsort(limit, kind="stable")
@@ -146,8 +170,7 @@ def nearest(queries: np.ndarray, database: np.ndarray, k: int, *, index: str = "
                 continue
             want = min(top, k + top - bottom)
             sel = faiss.IDSelectorRange(0, top)
-            params = (faiss.SearchParametersIVF(sel=sel, **probe) if probe
-                      else faiss.SearchParameters(sel=sel))
+            params = faiss.SearchParametersIVF(sel=sel, **probe)
             dist, idx = ix.search(qc[rows], want, params=params)
             for r, d_row, i_row in zip(rows, dist, idx, strict=True):
                 keep = (i_row >= 0) & (i_row < limit[r])
@@ -174,31 +197,168 @@ def _descriptors(queries: np.ndarray, database: np.ndarray) -> tuple[np.ndarray,
 def match_candidates(queries: np.ndarray, database: np.ndarray, cand: Candidates,
                      config: MatcherConfig, *, db_limit: np.ndarray | None = None,
                      enhance_window: int | None = None, root: bool = False) -> MatchResult:
-    """`config`'s matcher through the candidates `cand` (module doc, 2-4); `root`: the
-    differences are L2 distances (``distance=euclidean``), else squared ones (Eq. 4)."""
+    """`config`'s matcher through the candidates `cand` (module doc, 2-4), its differences made
+    from the descriptors (the ``ivf`` index's path; `search_rows` reads them from the rows
+    instead); `root`: the differences are L2 distances (``distance=euclidean``), else squared
+    ones (Eq. 4)."""
     q, db = _descriptors(queries, database)
     nq, ndb = len(q), len(db)
     if cand.index.shape[0] != nq:
         raise DataError(f"candidates for {cand.index.shape[0]} queries, but {nq} queries")
     limit = db_limits(db_limit, nq, ndb)
-    window = window_of(config, enhance_window)
-    before, after = ((window // 2, window // 2) if config.enhance_mode == "centred"
-                     else (window, 0)) if window > 0 else (0, 0)
+    window, head, tail = _setting(config, enhance_window)
     centre = db.mean(axis=0, dtype=np.float64)
     dbc = np.ascontiguousarray(db - centre, dtype=np.float32)
     qc = np.ascontiguousarray(q - centre, dtype=np.float32)
     dbn = np.einsum("ij,ij->i", dbc, dbc, dtype=np.float64)
-    offs = config.offsets()
-    u_lo, _ = config.u_range()
-    index, best, second, vel, n_terms, low = _kernel(
-        qc, dbc, dbn, np.ascontiguousarray(cand.index), offs, u_lo,
-        config.edge_queries == "skip", config.out_of_range == "clip", limit,
-        config.ratio_window // 2, before, after, root)
-    shift = 0.0
-    if config.shift:
-        seen = low[np.isfinite(low)]
-        shift = float(seen.min()) if seen.size else 0.0
-    return finish(config, (index, best, second, vel, n_terms), shift, ndb, window)
+    *found, low = _kernel(qc, dbc, dbn, _NO_ROWS, 0, 0, nq, nq, ndb,
+                          np.ascontiguousarray(cand.index), *head, limit, *tail, root)
+    return finish(config, tuple(found), _shift(config, [low]), ndb, window)
+
+
+def search_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_database: int, k: int,
+                configs: Sequence[MatcherConfig], *, db_limit: np.ndarray | None = None,
+                windows: Sequence[int | None] | None = None, block: int | None = None,
+                ) -> tuple[Candidates, list[MatchResult], list[float]]:
+    """The ``flat`` index and the search through it in one pass over the difference matrix
+    whose rows ``[a, b)`` ``rows(a, b)`` returns, `block` rows at a time (module doc, 1 and 3):
+    each query's `k` lowest differences in its own row are its candidates, and every setting
+    of `configs` searches them on those rows. Holds one block and the trajectories' rows
+    before and after it, never the whole matrix. Returns the candidates, the results, and per
+    setting the seconds spent: computing the rows and choosing the candidates (shared, counted
+    to each) and its own search."""
+    nq, ndb = int(n_queries), int(n_database)
+    if nq < 1 or ndb < 1:
+        raise DataError(f"difference matrix is empty (shape ({nq}, {ndb}))")
+    k = check_k(k, ndb)
+    limit = db_limits(db_limit, nq, ndb)
+    step = _rows_step(nq, ndb, block)
+    given = list(windows) if windows is not None else [None] * len(configs)
+    if len(given) != len(configs):
+        raise ConfigError(f"{len(configs)} matcher settings but {len(given)} windows")
+    chosen = [_setting(c, w) for c, w in zip(configs, given, strict=True)]
+    reach = [c.u_range() for c in configs]
+    cand_i = np.full((nq, k), -1, np.int64)
+    cand_d = np.full((nq, k), np.inf)
+    held: np.ndarray = np.empty((0, ndb), np.float32)
+    held_lo = 0
+    done = [0] * len(configs)
+    found: list[list[tuple[np.ndarray, ...]]] = [[] for _ in configs]
+    shared, own = 0.0, [0.0] * len(configs)
+    for a in range(0, nq, step):
+        b = min(a + step, nq)
+        t0 = time.perf_counter()
+        raw: np.ndarray = np.asarray(rows(a, b))
+        if raw.shape != (b - a, ndb):
+            raise DataError(f"rows {a}..{b - 1} of the difference matrix have shape {raw.shape}, "
+                            f"expected ({b - a}, {ndb})")
+        try:
+            raw = _as_difference(raw, np.float32 if raw.dtype == np.float32 else np.float64)
+        except DataError as exc:
+            raise DataError(f"rows {a}..{b - 1}: {exc}") from None
+        cand_i[a:b], cand_d[a:b] = _nearest_rows(raw, limit[a:b], k)
+        held = raw if not len(held) else np.concatenate([held.astype(raw.dtype, copy=False), raw])
+        shared += time.perf_counter() - t0
+        for s, (_, head, tail) in enumerate(chosen):
+            t0 = time.perf_counter()
+            end = nq if b == nq else min(nq, max(done[s], b - reach[s][1]))
+            if end > done[s]:
+                out = _kernel(_NO_ROWS, _NO_ROWS, _NO_NORMS, held, held_lo, done[s], end, nq,
+                              ndb, cand_i, *head, limit, *tail, False)
+                found[s].append(out)
+                done[s] = end
+            own[s] += time.perf_counter() - t0
+        first_read = min(max(0, d + r[0]) for d, r in zip(done, reach, strict=True))
+        if first_read > held_lo:  # the rows no query left to search reads
+            held = held[first_read - held_lo:].copy()
+            held_lo = first_read
+    results = []
+    for cfg, (window, _, _), parts in zip(configs, chosen, found, strict=True):
+        cols = [np.concatenate([p[m] for p in parts]) for m in range(6)]
+        results.append(finish(cfg, tuple(cols[:5]), _shift(cfg, [cols[5]]), ndb, window))
+    return Candidates(cand_i, cand_d), results, [shared + x for x in own]
+
+
+#: The kernel's "no rows" (its differences made from descriptors) and "no descriptors".
+_NO_ROWS = np.empty((0, 0), np.float32)
+_NO_NORMS = np.empty(0)
+
+
+def _rows_step(nq: int, ndb: int, block: int | None) -> int:
+    """Query rows per block of the ``flat`` path: `block`, else as many as two copies of the
+    rows fit in the memory budget (the block's rows and the held ones,
+    `safl_bench.matching.blocks.block_rows`)."""
+    from safl_bench.matching.blocks import block_rows
+
+    step = block_rows(nq, ndb, copies=2) if block is None else block
+    if not isinstance(step, int | np.integer) or isinstance(step, bool) or step < 1:
+        raise ConfigError(f"block size must be a whole number of query rows >= 1, got {block!r}")
+    return int(step)
+
+
+def _setting(config: MatcherConfig, enhance_window: int | None,
+             ) -> tuple[int, tuple[np.ndarray, int, bool, bool], tuple[int, int, int]]:
+    """`config`'s enhancement window and the kernel's arguments for it: those between the
+    candidates and the limits (offsets, u_lo, the edge and out-of-range rules), and those
+    after (the ratio half-window, the enhancement's reach before and after a frame)."""
+    window = window_of(config, enhance_window)
+    before, after = ((window // 2, window // 2) if config.enhance_mode == "centred"
+                     else (window, 0)) if window > 0 else (0, 0)
+    return window, (config.offsets(), config.u_range()[0], config.edge_queries == "skip",
+                    config.out_of_range == "clip"), (config.ratio_window // 2, before, after)
+
+
+def _shift(config: MatcherConfig, lows: list[np.ndarray]) -> float:
+    """The shift (module doc, 4): the lowest enhanced value read, 0 when none or unshifted."""
+    if not config.shift:
+        return 0.0
+    seen = np.concatenate(lows)
+    seen = seen[np.isfinite(seen)]
+    return float(seen.min()) if seen.size else 0.0
+
+
+@numba.njit(parallel=True, cache=True)
+def _nearest_rows(D, limit, k):
+    """Per row i: its `k` lowest values among frames ``0 .. limit[i] - 1`` (ties: the lower
+    frame), in ascending frame order, -1 and +inf padding a row with fewer frames."""
+    n = D.shape[0]
+    idx = np.full((n, k), -1, np.int64)
+    dist = np.full((n, k), np.inf)
+    for i in numba.prange(n):
+        m = min(limit[i], k)
+        bi = np.empty(k, np.int64)
+        bv = np.empty(k)
+        if k > _INSERT_K:  # a stable sort: the lowest k, equal values in frame order
+            order = np.argsort(D[i, :limit[i]], kind="mergesort")[:m]
+            for x in range(m):
+                bi[x] = order[x]
+                bv[x] = D[i, order[x]]
+        else:  # k kept in a sorted list; an equal value never displaces an earlier frame
+            cnt = 0
+            for j in range(limit[i]):
+                v = float(D[i, j])
+                if cnt < k:
+                    p = cnt
+                    cnt += 1
+                elif v < bv[k - 1]:
+                    p = k - 1
+                else:
+                    continue
+                while p > 0 and bv[p - 1] > v:
+                    bv[p] = bv[p - 1]
+                    bi[p] = bi[p - 1]
+                    p -= 1
+                bv[p] = v
+                bi[p] = j
+        order = np.argsort(bi[:m])
+        for x in range(m):
+            idx[i, x] = bi[order[x]]
+            dist[i, x] = bv[order[x]]
+    return idx, dist
+
+
+#: Up to this many candidates a row keeps them in a sorted list as it reads it; beyond, it sorts.
+_INSERT_K = 32
 
 
 @numba.njit(cache=True, fastmath=True)
@@ -240,17 +400,21 @@ def _tile(q, r0, r1, r2, r3, db, c0, c1, c2, c3, out, j):
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before, after, root):
-    nq = q.shape[0]
-    ndb = db.shape[0]
+def _kernel(q, db, dbn, D, row0, t0, t1, nq, ndb, cand, offs, u_lo, skip_edges, clip, limit,
+            half, before, after, root):
+    """The search of queries ``t0 .. t1 - 1`` of `nq` (module doc, 2-4). Its differences are
+    read from the rows `D` (row r of the whole matrix is ``D[r - row0]``) when it has any, else
+    made from the centred descriptors `q`, `db` (norms `dbn`; `root`: their L2 root)."""
+    from_rows = D.shape[0] > 0
     nv, L = offs.shape
     kc = cand.shape[1]
-    index = np.full(nq, -1, dtype=np.int64)
-    best_s = np.full(nq, np.inf)
-    second = np.full(nq, np.inf)
-    vel = np.full(nq, -1, dtype=np.int64)
-    n_terms = np.zeros(nq, dtype=np.int64)
-    low = np.full(nq, np.inf)
+    n_out = t1 - t0
+    index = np.full(n_out, -1, dtype=np.int64)
+    best_s = np.full(n_out, np.inf)
+    second = np.full(n_out, np.inf)
+    vel = np.full(n_out, -1, dtype=np.int64)
+    n_terms = np.zeros(n_out, dtype=np.int64)
+    low = np.full(n_out, np.inf)
     enhance = before + after > 0
     # the widest union of frames a group of four points reads, plus a tile's padding
     spread = 0
@@ -260,22 +424,23 @@ def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before,
                 for vi2 in range(nv):
                     spread = max(spread, abs(offs[vi, k] - offs[vi2, k2]))
     width = min(ndb, spread + before + after + 1) + 3
-    qns = np.empty(nq)
-    for r in numba.prange(nq):
+    qns = np.zeros(q.shape[0])
+    for r in numba.prange(q.shape[0]):
         qn = 0.0
         for x in range(q.shape[1]):
             qn += float(q[r, x]) * float(q[r, x])
         qns[r] = qn
-    for T in numba.prange(nq):
+    for T in numba.prange(t0, t1):
+        o = T - t0
         k0 = max(0, -T - u_lo)
         k1 = min(L, nq - T - u_lo)
         cnt = k1 - k0
-        n_terms[T] = cnt
+        n_terms[o] = cnt
         jend = limit[T]
         if (skip_edges and cnt < L) or jend <= 0:
             continue
         sums = np.full((kc, nv), np.inf)
-        prod = np.empty((4, width), np.float32)
+        prod = np.empty((4, width if not from_rows else 0), np.float32)
         d = np.empty(width)
         lo = np.empty(4, np.int64)
         hi = np.empty(4, np.int64)
@@ -323,18 +488,23 @@ def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before,
                     gb = max(gb, hi[i])
                 rr = T + u_lo + g0
                 rl = T + u_lo + g1 - 1  # padding rows repeat the group's last row
-                for cc in range(ga, gb, 4):
-                    _tile(q, rr, min(rr + 1, rl), min(rr + 2, rl), min(rr + 3, rl),
-                          db, cc, min(cc + 1, ndb - 1), min(cc + 2, ndb - 1),
-                          min(cc + 3, ndb - 1), prod, cc - ga)
+                if not from_rows:
+                    for cc in range(ga, gb, 4):
+                        _tile(q, rr, min(rr + 1, rl), min(rr + 2, rl), min(rr + 3, rl),
+                              db, cc, min(cc + 1, ndb - 1), min(cc + 2, ndb - 1),
+                              min(cc + 3, ndb - 1), prod, cc - ga)
                 for k in range(g0, g1):
                     r = T + u_lo + k
-                    qn = qns[r]
                     a = lo[k - g0]
                     b = hi[k - g0]
-                    for c in range(a, b):
-                        v = max(qn + dbn[c] - 2.0 * float(prod[k - g0, c - ga]), 0.0)
-                        d[c - a] = np.sqrt(v) if root else v
+                    if from_rows:
+                        for c in range(a, b):
+                            d[c - a] = D[r - row0, c]
+                    else:
+                        qn = qns[r]
+                        for c in range(a, b):
+                            v = max(qn + dbn[c] - 2.0 * float(prod[k - g0, c - ga]), 0.0)
+                            d[c - a] = np.sqrt(v) if root else v
                     floor = 0.0
                     if enhance:
                         m = 0.0
@@ -375,7 +545,7 @@ def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before,
                         lowest = min(lowest, z)
                         seen_c = c
                         seen_z = z
-        low[T] = lowest
+        low[o] = lowest
         cstar = -1
         vstar = -1
         bval = np.inf
@@ -397,15 +567,15 @@ def _kernel(q, db, dbn, cand, offs, u_lo, skip_edges, clip, limit, half, before,
                 if sums[cstar, vi] == per[cstar]:
                     vstar = vi
                     break
-            index[T] = jstar
-            best_s[T] = bval / cnt
-            vel[T] = vstar
+            index[o] = jstar
+            best_s[o] = bval / cnt
+            vel[o] = vstar
             sv = np.inf
             for ci in range(kc):
                 j = cand[T, ci]
                 if j >= 0 and abs(j - jstar) > half and per[ci] < sv:
                     sv = per[ci]
-            second[T] = sv / cnt
+            second[o] = sv / cnt
     return index, best_s, second, vel, n_terms, low
 
 
