@@ -120,11 +120,11 @@ def run(n: int = 4541, dim: int = 1024, *, mode: str = "exact", k: int = 10,
         return candidates.match_candidates(q, db, cand, cfg)
 
     if mode == "candidates":  # compile the kernels outside the clock
-        small_q, small_db, _ = planted(64, 4)
+        small_q, small_db, _ = planted(16, 4)
         candidates.match_candidates(small_q, small_db, candidates.nearest(small_q, small_db, 2),
                                     cfg)
-        candidates.search_rows(lambda a, b: distance.sqeuclidean(small_q[a:b], small_db), 64,
-                               64, 2, [cfg])
+        candidates.search_rows(lambda a, b: distance.sqeuclidean(small_q[a:b], small_db), 16,
+                               16, 2, [cfg])
     fn = exact if mode == "exact" else through_candidates
     t0 = time.perf_counter()
     result, peak = timing.measure_peak(fn)  # the first run: its matches and its memory

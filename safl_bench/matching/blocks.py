@@ -164,8 +164,8 @@ def _shape(n_queries: int, n_database: int) -> tuple[int, int]:
     return nq, ndb
 
 
-def _step(nq: int, ndb: int, block: int | None) -> int:
-    step = block_rows(nq, ndb) if block is None else block
+def _step(nq: int, ndb: int, block: int | None, copies: int = 3) -> int:
+    step = block_rows(nq, ndb, copies=copies) if block is None else block
     if not isinstance(step, int | np.integer) or isinstance(step, bool) or step < 1:
         raise ConfigError(f"block size must be a whole number of query rows >= 1, got {block!r}")
     return int(step)

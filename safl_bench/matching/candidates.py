@@ -56,9 +56,8 @@ its own distance (`Method.distance` overridden: SAD's L1, Scan Context's shifted
 ConfigError unless the cell's ``distance=euclidean`` says to compare its descriptors by L2.
 
 Memory. The flat path holds one block of rows and the rows its trajectories reach before and
-after it (`_rows_step`: two copies of a block in the budget of
-`safl_bench.matching.blocks.block_rows`), and the (Nq, k) candidates; FAISS is needed for the
-``ivf`` index only.
+after it (two copies of a block in the budget of `safl_bench.matching.blocks.block_rows`), and
+the (Nq, k) candidates; FAISS is needed for the ``ivf`` index only.
 """
 
 from __future__ import annotations
@@ -72,6 +71,7 @@ import numba
 import numpy as np
 
 from safl_bench.errors import ConfigError, DataError
+from safl_bench.matching import blocks
 from safl_bench.matching.matcher import (
     MatcherConfig,
     MatchResult,
@@ -139,13 +139,8 @@ def nearest(queries: np.ndarray, database: np.ndarray, k: int, *, index: str = "
     if index == "flat":
         from safl_bench.methods.distance import sqeuclidean
 
-        step = _rows_step(nq, ndb, block)
-        out_i = np.empty((nq, k), np.int64)
-        out_d = np.empty((nq, k))
-        for a in range(0, nq, step):
-            b = min(a + step, nq)
-            out_i[a:b], out_d[a:b] = _nearest_rows(sqeuclidean(q[a:b], db), limit[a:b], k)
-        return Candidates(out_i, out_d)
+        return search_rows(lambda a, b: sqeuclidean(q[a:b], db), nq, ndb, k, [],
+                           db_limit=limit, block=block)[0]
     faiss = faiss_module()
     centre = db.mean(axis=0, dtype=np.float64)
     dbc = np.ascontiguousarray(db - centre, dtype=np.float32)
@@ -206,14 +201,15 @@ def match_candidates(queries: np.ndarray, database: np.ndarray, cand: Candidates
     if cand.index.shape[0] != nq:
         raise DataError(f"candidates for {cand.index.shape[0]} queries, but {nq} queries")
     limit = db_limits(db_limit, nq, ndb)
-    window, head, tail = _setting(config, enhance_window)
+    window = window_of(config, enhance_window)
+    head, tail = _setting(config, window)
     centre = db.mean(axis=0, dtype=np.float64)
     dbc = np.ascontiguousarray(db - centre, dtype=np.float32)
     qc = np.ascontiguousarray(q - centre, dtype=np.float32)
     dbn = np.einsum("ij,ij->i", dbc, dbc, dtype=np.float64)
     *found, low = _kernel(qc, dbc, dbn, _NO_ROWS, 0, 0, nq, nq, ndb,
                           np.ascontiguousarray(cand.index), *head, limit, *tail, root)
-    return finish(config, tuple(found), _shift(config, [low]), ndb, window)
+    return finish(config, tuple(found), _shift(config, low), ndb, window)
 
 
 def search_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_database: int, k: int,
@@ -226,17 +222,15 @@ def search_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_databa
     of `configs` searches them on those rows. Holds one block and the trajectories' rows
     before and after it, never the whole matrix. Returns the candidates, the results, and per
     setting the seconds spent: computing the rows and choosing the candidates (shared, counted
-    to each) and its own search."""
-    nq, ndb = int(n_queries), int(n_database)
-    if nq < 1 or ndb < 1:
-        raise DataError(f"difference matrix is empty (shape ({nq}, {ndb}))")
+    to each) and its own search. With no settings, the candidates alone (`nearest`). `block`:
+    when None, as many rows as two copies of a block fit in the memory budget (the block's and
+    the held ones, `safl_bench.matching.blocks.block_rows`)."""
+    nq, ndb = blocks._shape(n_queries, n_database)
     k = check_k(k, ndb)
     limit = db_limits(db_limit, nq, ndb)
-    step = _rows_step(nq, ndb, block)
-    given = list(windows) if windows is not None else [None] * len(configs)
-    if len(given) != len(configs):
-        raise ConfigError(f"{len(configs)} matcher settings but {len(given)} windows")
-    chosen = [_setting(c, w) for c, w in zip(configs, given, strict=True)]
+    step = blocks._step(nq, ndb, block, copies=2)
+    chosen = [(w, *_setting(c, w)) for c, w in
+              zip(configs, blocks._windows(configs, windows), strict=True)]
     reach = [c.u_range() for c in configs]
     cand_i = np.full((nq, k), -1, np.int64)
     cand_d = np.full((nq, k), np.inf)
@@ -268,14 +262,15 @@ def search_rows(rows: Callable[[int, int], np.ndarray], n_queries: int, n_databa
                 found[s].append(out)
                 done[s] = end
             own[s] += time.perf_counter() - t0
-        first_read = min(max(0, d + r[0]) for d, r in zip(done, reach, strict=True))
+        first_read = min((max(0, d + r[0]) for d, r in zip(done, reach, strict=True)),
+                         default=b)
         if first_read > held_lo:  # the rows no query left to search reads
             held = held[first_read - held_lo:].copy()
             held_lo = first_read
     results = []
     for cfg, (window, _, _), parts in zip(configs, chosen, found, strict=True):
         cols = [np.concatenate([p[m] for p in parts]) for m in range(6)]
-        results.append(finish(cfg, tuple(cols[:5]), _shift(cfg, [cols[5]]), ndb, window))
+        results.append(finish(cfg, tuple(cols[:5]), _shift(cfg, cols[5]), ndb, window))
     return Candidates(cand_i, cand_d), results, [shared + x for x in own]
 
 
@@ -284,36 +279,22 @@ _NO_ROWS = np.empty((0, 0), np.float32)
 _NO_NORMS = np.empty(0)
 
 
-def _rows_step(nq: int, ndb: int, block: int | None) -> int:
-    """Query rows per block of the ``flat`` path: `block`, else as many as two copies of the
-    rows fit in the memory budget (the block's rows and the held ones,
-    `safl_bench.matching.blocks.block_rows`)."""
-    from safl_bench.matching.blocks import block_rows
-
-    step = block_rows(nq, ndb, copies=2) if block is None else block
-    if not isinstance(step, int | np.integer) or isinstance(step, bool) or step < 1:
-        raise ConfigError(f"block size must be a whole number of query rows >= 1, got {block!r}")
-    return int(step)
-
-
-def _setting(config: MatcherConfig, enhance_window: int | None,
-             ) -> tuple[int, tuple[np.ndarray, int, bool, bool], tuple[int, int, int]]:
-    """`config`'s enhancement window and the kernel's arguments for it: those between the
+def _setting(config: MatcherConfig, window: int,
+             ) -> tuple[tuple[np.ndarray, int, bool, bool], tuple[int, int, int]]:
+    """The kernel's arguments for `config` with enhancement window `window`: those between the
     candidates and the limits (offsets, u_lo, the edge and out-of-range rules), and those
     after (the ratio half-window, the enhancement's reach before and after a frame)."""
-    window = window_of(config, enhance_window)
     before, after = ((window // 2, window // 2) if config.enhance_mode == "centred"
                      else (window, 0)) if window > 0 else (0, 0)
-    return window, (config.offsets(), config.u_range()[0], config.edge_queries == "skip",
-                    config.out_of_range == "clip"), (config.ratio_window // 2, before, after)
+    return ((config.offsets(), config.u_range()[0], config.edge_queries == "skip",
+             config.out_of_range == "clip"), (config.ratio_window // 2, before, after))
 
 
-def _shift(config: MatcherConfig, lows: list[np.ndarray]) -> float:
+def _shift(config: MatcherConfig, low: np.ndarray) -> float:
     """The shift (module doc, 4): the lowest enhanced value read, 0 when none or unshifted."""
     if not config.shift:
         return 0.0
-    seen = np.concatenate(lows)
-    seen = seen[np.isfinite(seen)]
+    seen = low[np.isfinite(low)]
     return float(seen.min()) if seen.size else 0.0
 
 
